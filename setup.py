@@ -1,0 +1,21 @@
+"""Maps the project's package roots (DESIGN.md layout) onto one distribution.
+
+pyproject.toml holds the metadata; this file only computes the package list, because the
+packages live in several top-level folders (src/, and the ament_python package folders).
+"""
+from setuptools import find_packages, setup
+
+ROOTS = {
+    "roszen": "src/roszen",
+    "astrobee": "src/astrobee",
+    "astrobee_sim": "astrobee_sim/astrobee_sim",
+    "astrobee_planning": "astrobee_planning/astrobee_planning",
+    "astrobee_control": "astrobee_control/astrobee_control",
+}
+
+packages = []
+for name, path in ROOTS.items():
+    packages.append(name)
+    packages += [f"{name}.{sub}" for sub in find_packages(path)]
+
+setup(packages=packages, package_dir=ROOTS)
