@@ -1,6 +1,6 @@
 """Run every benchmark in bench/ (each prints its own table beside the reference figures).
 
-Usage: python bench/run_all.py [--full]   (--full passes --full to benchmarks that accept it)
+Usage: python bench/run_all.py
 Each benchmark runs in its own process so one failing or slow bench does not stop the rest.
 """
 from __future__ import annotations
@@ -13,14 +13,13 @@ from pathlib import Path
 
 def main() -> int:
     here = Path(__file__).resolve().parent
-    extra = ["--full"] if "--full" in sys.argv[1:] else []
     failed = []
     for script in sorted(here.glob("*.py")):
         if script.name == "run_all.py" or script.name.startswith("_"):
             continue
         print(f"\n=== {script.name} ===", flush=True)
         t0 = time.monotonic()
-        rc = subprocess.call([sys.executable, str(script), *extra], cwd=here.parent)
+        rc = subprocess.call([sys.executable, str(script)], cwd=here.parent)
         print(f"--- {script.name}: exit {rc}, {time.monotonic() - t0:.1f} s", flush=True)
         if rc != 0:
             failed.append(script.name)
