@@ -1,0 +1,137 @@
+"""The controller's mobility state machine around the PD law: follow a segment, stop and hold.
+
+Transport-free: pd_controller_node feeds it states and segments and publishes what it returns.
+MotionState values follow NASA ff_msgs/MotionState. Life cycle:
+    IDLE (no command yet; zero wrench)  --first state (hold_on_start)-->  STOPPED (hold pose)
+    any  --segment-->  CONTROLLING (track it)  --end of segment-->  STOPPING (hold final pose
+    until within tolerance and at rest, or settle_time)  -->  STOPPED
+    any  --stop request-->  STOPPING (hold the pose where the stop came)  --at rest-->  STOPPED
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from astrobee import rotations as rot
+from astrobee.flight_modes import FlightMode
+
+from .mass import MassProperties
+from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdTracker, Reference, State
+from .reference import SampledTrajectory
+
+INITIALIZING, IDLE, STOPPED, IDLING, STOPPING = 0, 1, 2, 3, 4
+CONTROLLING = 9
+STATE_NAMES = {0: "INITIALIZING", 1: "IDLE", 2: "STOPPED", 3: "IDLING", 4: "STOPPING",
+               9: "CONTROLLING"}
+
+STOP_SPEED = 0.01    # m/s: "at rest" when stopping
+STOP_OMEGA = 0.02    # rad/s
+
+
+@dataclass
+class Step:
+    """What one control tick produces."""
+
+    output: Output
+    reference: Reference
+    control_mode: int
+    state: int
+    event: str  # non-empty when the state changed this tick (why)
+
+
+class Tracker:
+    """Segment follower: a PdTracker plus the IDLE/CONTROLLING/STOPPING/STOPPED logic."""
+
+    def __init__(self, flight_mode: FlightMode, mass: MassProperties, settle_time: float = 5.0,
+                 hold_on_start: bool = True) -> None:
+        self.pd = PdTracker(flight_mode, mass)
+        self.settle_time = settle_time
+        self.hold_on_start = hold_on_start
+        self.state = IDLE
+        self.traj: SampledTrajectory | None = None
+        self.hold: Reference | None = None
+        self._stopping_since = 0.0
+        self._pending_event = ""
+        self.segment_result = ""  # "" while running, else GOAL_REACHED / TOLERANCE_TIMEOUT / STOPPED
+
+    @property
+    def flight_mode(self) -> FlightMode:
+        return self.pd.flight_mode
+
+    def set_flight_mode(self, mode: FlightMode) -> None:
+        self.pd.set_flight_mode(mode)
+
+    def set_mass(self, mass: MassProperties) -> None:
+        self.pd.set_mass(mass)
+
+    def _transition(self, state: int, event: str) -> None:
+        self.state = state
+        self._pending_event = event
+
+    def follow(self, traj: SampledTrajectory, now: float) -> None:
+        """Start tracking `traj`; a segment whose first time is already past is shifted to now."""
+        if traj.start_time < now:
+            traj = traj.shifted(now - traj.start_time)
+        self.traj = traj
+        self.pd.reset()
+        self.segment_result = ""
+        self._transition(CONTROLLING, f"segment of {traj.duration:.1f} s accepted")
+
+    def stop(self, state: State, now: float, why: str = "stop requested") -> None:
+        """Hold the current pose (zero-velocity reference) until at rest."""
+        self.traj = None
+        self.hold = Reference.hold(state.position, state.orientation)
+        self._stopping_since = now
+        if self.segment_result == "" and self.state == CONTROLLING:
+            self.segment_result = "STOPPED"
+        self._transition(STOPPING, why)
+
+    def idle(self, why: str = "idle requested") -> None:
+        self.traj = None
+        self.hold = None
+        self._transition(IDLE, why)
+
+    def _within(self, state: State, ref: Reference) -> bool:
+        fm = self.flight_mode
+        return (float(np.linalg.norm(state.position - ref.position)) <= fm.tolerance_pos
+                and rot.angle_between(state.orientation, ref.orientation) <= fm.tolerance_att)
+
+    def _at_rest(self, state: State) -> bool:
+        return (float(np.linalg.norm(state.velocity)) < STOP_SPEED
+                and float(np.linalg.norm(state.omega)) < STOP_OMEGA)
+
+    def update(self, state: State, now: float, dt: float) -> Step:
+        """One control tick at time `now` (s) for the measured `state`."""
+        if self.state == IDLE and self.hold_on_start and self.hold is None and self.traj is None:
+            self.hold = Reference.hold(state.position, state.orientation)
+            self._transition(STOPPED, "holding the start pose")
+        if self.state == CONTROLLING and self.traj is not None and now >= self.traj.end_time:
+            self.hold = self.traj.final()
+            self.traj = None
+            self._stopping_since = now
+            self._transition(STOPPING, "end of segment")
+        elif self.state == STOPPING and self.hold is not None:
+            reached = self._within(state, self.hold) and self._at_rest(state)
+            timed_out = now - self._stopping_since >= self.settle_time
+            if reached or timed_out:
+                if self.segment_result == "":
+                    self.segment_result = "GOAL_REACHED" if self._within(state, self.hold) \
+                        else "TOLERANCE_TIMEOUT"
+                self._transition(STOPPED, "at rest" if reached else "settle time elapsed")
+
+        if self.state == CONTROLLING and self.traj is not None:
+            ref, mode = self.traj.sample(now), MODE_NOMINAL
+        elif self.state in (STOPPING, STOPPED) and self.hold is not None:
+            ref, mode = self.hold, MODE_STOP
+        else:
+            ref = Reference.hold(state.position, state.orientation)
+            out = self.pd.step(state, ref, 0.0)
+            zero = np.zeros(3)
+            out.force, out.torque, out.accel, out.alpha = zero, zero.copy(), zero.copy(), zero.copy()
+            return self._step(out, ref, MODE_IDLE)
+        return self._step(self.pd.step(state, ref, dt), ref, mode)
+
+    def _step(self, out: Output, ref: Reference, mode: int) -> Step:
+        event, self._pending_event = self._pending_event, ""
+        return Step(out, ref, mode, self.state, event)
