@@ -1,0 +1,281 @@
+"""Astrobee in pybullet: a URDF generated from config/astrobee.yaml, wrench clipping and the arm.
+
+Mass model: the 9.58 kg of FACTS.md is the whole platform, arm included; the body link gets the
+rest (9.58 - 0.69 kg) and its inertia is chosen so the whole robot with the arm stowed has the
+FACTS inertia about its centre of mass (diagonal part; the arm's products of inertia, ~1e-4 kg m^2,
+are left out). The body's collision shape is one box covering body + propulsion modules (the
+0.32 m envelope): pybullet's soft-body collision needs convex shapes.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+
+from astrobee import config, flight_modes
+from astrobee import rotations as rot
+
+# Arm geometry (own approximation): link lengths (m) and mass split of the 0.69 kg arm.
+PROXIMAL_LEN = 0.10
+DISTAL_LEN = 0.06
+GRIPPER_LEN = 0.08
+ARM_MASSES = {"proximal": 0.30, "distal": 0.20, "gripper": 0.15, "finger": 0.02}
+MAX_ABS_WRENCH = 100.0   # N or N m: anything larger is a bad command, not a saturation
+
+
+def _box_inertia(m: float, size) -> list[float]:
+    x, y, z = size
+    return [m * (y * y + z * z) / 12, m * (x * x + z * z) / 12, m * (x * x + y * y) / 12]
+
+
+def _inertial(m: float, xyz, I) -> str:
+    return (f'<inertial><origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/><mass value="{m}"/>'
+            f'<inertia ixx="{I[0]}" iyy="{I[1]}" izz="{I[2]}" ixy="0" ixz="0" iyz="0"/></inertial>')
+
+
+def _box(size, xyz=(0, 0, 0), rgba=None, collision=True) -> str:
+    g = f'<geometry><box size="{size[0]} {size[1]} {size[2]}"/></geometry>'
+    o = f'<origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/>'
+    s = f'<visual>{o}{g}'
+    if rgba:
+        s += f'<material name="m{abs(hash(tuple(rgba))) % 10000}"><color rgba="{" ".join(map(str, rgba))}"/></material>'
+    s += '</visual>'
+    if collision:
+        s += f'<collision>{o}{g}</collision>'
+    return s
+
+
+def urdf(body_mass: float, body_com, body_inertia) -> str:
+    """The Astrobee URDF text (base link `body`, arm links proximal/distal/gripper, two fingers)."""
+    cfg = config.astrobee()
+    arm = cfg["arm"]
+    bs, ps, py = cfg["body_size"], cfg["propulsion_module_size"], cfg["propulsion_module_y"]
+    env = [max(bs[0], ps[0]), 2 * py + ps[1], max(bs[2], ps[2])]
+    body = ('<link name="body">' + _inertial(body_mass, body_com, body_inertia)
+            + _box(bs, rgba=[0.9, 0.9, 0.9, 1], collision=False)
+            + _box(ps, (0, py, 0), rgba=[0.2, 0.4, 0.8, 1], collision=False)
+            + _box(ps, (0, -py, 0), rgba=[0.2, 0.4, 0.8, 1], collision=False)
+            + f'<collision><geometry><box size="{env[0]} {env[1]} {env[2]}"/></geometry></collision>'
+            + '</link>')
+    m, r = arm["mount_xyz"], arm["mount_rpy"]
+    pl, dl = arm["proximal_limits"], arm["distal_limits"]
+    v = arm["joint_speed"]
+    A = ARM_MASSES
+    s = f'<?xml version="1.0"?><robot name="astrobee">{body}'
+    # Deployed (0 rad) the arm points along the mount frame's +x (the body's -x: out of the aft).
+    s += ('<link name="arm_proximal">'
+          + _inertial(A["proximal"], (PROXIMAL_LEN / 2, 0, 0), _box_inertia(A["proximal"], (PROXIMAL_LEN, .03, .03)))
+          + _box((PROXIMAL_LEN, 0.03, 0.03), (PROXIMAL_LEN / 2, 0, 0), [0.3, 0.3, 0.3, 1], False) + '</link>')
+    s += (f'<joint name="arm_proximal_joint" type="revolute"><parent link="body"/><child link="arm_proximal"/>'
+          f'<origin xyz="{m[0]} {m[1]} {m[2]}" rpy="{r[0]} {r[1]} {r[2]}"/><axis xyz="0 1 0"/>'
+          f'<limit lower="{pl[0]}" upper="{pl[1]}" effort="2.0" velocity="{v}"/></joint>')
+    s += ('<link name="arm_distal">'
+          + _inertial(A["distal"], (DISTAL_LEN / 2, 0, 0), _box_inertia(A["distal"], (DISTAL_LEN, .03, .03)))
+          + _box((DISTAL_LEN, 0.03, 0.03), (DISTAL_LEN / 2, 0, 0), [0.4, 0.4, 0.4, 1], False) + '</link>')
+    s += (f'<joint name="arm_distal_joint" type="revolute"><parent link="arm_proximal"/><child link="arm_distal"/>'
+          f'<origin xyz="{PROXIMAL_LEN} 0 0"/><axis xyz="0 0 1"/>'
+          f'<limit lower="{dl[0]}" upper="{dl[1]}" effort="2.0" velocity="{v}"/></joint>')
+    s += ('<link name="gripper">'
+          + _inertial(A["gripper"], (GRIPPER_LEN / 2, 0, 0), _box_inertia(A["gripper"], (GRIPPER_LEN, .04, .02)))
+          + _box((GRIPPER_LEN * 0.6, 0.04, 0.02), (GRIPPER_LEN * 0.3, 0, 0), [0.2, 0.2, 0.2, 1], False) + '</link>')
+    s += (f'<joint name="gripper_mount" type="fixed"><parent link="arm_distal"/><child link="gripper"/>'
+          f'<origin xyz="{DISTAL_LEN} 0 0"/></joint>')
+    gmax = float(arm["gripper_open"]) / 2
+    for side, sign in (("left", 1), ("right", -1)):
+        s += (f'<link name="finger_{side}">'
+              + _inertial(A["finger"], (GRIPPER_LEN * 0.2, 0, 0), _box_inertia(A["finger"], (GRIPPER_LEN * .4, .005, .015)))
+              + _box((GRIPPER_LEN * 0.4, 0.005, 0.015), (GRIPPER_LEN * 0.2, 0, 0), [0.1, 0.1, 0.1, 1], False) + '</link>')
+        s += (f'<joint name="finger_{side}_joint" type="prismatic"><parent link="gripper"/><child link="finger_{side}"/>'
+              f'<origin xyz="{GRIPPER_LEN * 0.6} 0 0"/><axis xyz="0 {sign} 0"/>'
+              f'<limit lower="0" upper="{gmax}" effort="5.0" velocity="0.05"/></joint>')
+    return s + '</robot>'
+
+
+class Robot:
+    """One Astrobee in a pybullet client: pose/twist in the body frame, clipped wrench, arm."""
+
+    def __init__(self, client: int, name: str = "", position=(0, 0, 0), orientation=(0, 0, 0, 1),
+                 flight_mode: str | None = None, drag: bool = False):
+        import pybullet as p
+        self.p, self.client, self.name = p, client, name
+        cfg = config.astrobee()
+        self.cfg = cfg
+        self.mass = float(cfg["mass"])
+        self.inertia = np.asarray(cfg["inertia"], dtype=float)
+        self.com_body = np.asarray(cfg["com_offset"], dtype=float)   # whole robot, body frame
+        self.drag = drag
+        self.drag_k = 0.5 * cfg["air_density"] * cfg["drag_coefficient"] * cfg["drag_area"]
+        self.mode = flight_modes.get(flight_mode)
+        arm_mass = sum(ARM_MASSES.values()) + ARM_MASSES["finger"]
+        self.body_mass = self.mass - arm_mass
+        path = self._write(urdf(self.body_mass, self.com_body, (self.inertia * 0.9).tolist()))
+        try:
+            self.id = p.loadURDF(path, flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
+        finally:
+            os.unlink(path)
+        self.joints = {p.getJointInfo(self.id, j, physicsClientId=client)[1].decode(): j
+                       for j in range(p.getNumJoints(self.id, physicsClientId=client))}
+        self.links = {p.getJointInfo(self.id, j, physicsClientId=client)[12].decode(): j
+                      for j in self.joints.values()}
+        for j in range(-1, p.getNumJoints(self.id, physicsClientId=client)):
+            p.changeDynamics(self.id, j, linearDamping=0, angularDamping=0,
+                             physicsClientId=client)
+        self.arm_targets = {"arm_proximal_joint": cfg["arm"]["stowed"]["proximal"],
+                            "arm_distal_joint": cfg["arm"]["stowed"]["distal"]}
+        self.gripper_target = 0.0
+        self._set_joints_now()
+        self._fit_inertia()
+        self.wrench_cmd = np.zeros(6)      # body frame, after clipping
+        self.set_pose(position, orientation)
+
+    @staticmethod
+    def _write(text: str) -> str:
+        fd, path = tempfile.mkstemp(suffix=".urdf", prefix="astrobee_")
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        return path
+
+    def _set_joints_now(self) -> None:
+        for jn, q in self.arm_targets.items():
+            self.p.resetJointState(self.id, self.joints[jn], q, 0.0, physicsClientId=self.client)
+        for f in ("finger_left_joint", "finger_right_joint"):
+            self.p.resetJointState(self.id, self.joints[f], self.gripper_target, 0.0,
+                                   physicsClientId=self.client)
+        self._motors()
+
+    def _motors(self) -> None:
+        p = self.p
+        js = [self.joints[j] for j in self.arm_targets]
+        p.setJointMotorControlArray(self.id, js, p.POSITION_CONTROL,
+                                    targetPositions=list(self.arm_targets.values()),
+                                    forces=[2.0, 2.0], positionGains=[0.3, 0.3],
+                                    physicsClientId=self.client)
+        fs = [self.joints["finger_left_joint"], self.joints["finger_right_joint"]]
+        p.setJointMotorControlArray(self.id, fs, p.POSITION_CONTROL,
+                                    targetPositions=[self.gripper_target] * 2, forces=[5.0, 5.0],
+                                    physicsClientId=self.client)
+
+    def _fit_inertia(self) -> None:
+        """Body-link inertia so the whole robot (arm stowed) has the configured COM inertia."""
+        p, c = self.p, self.client
+        p.resetBasePositionAndOrientation(self.id, [0, 0, 0], [0, 0, 0, 1], physicsClientId=c)
+        base_pos = np.array(p.getBasePositionAndOrientation(self.id, physicsClientId=c)[0])
+        local = np.array(p.getDynamicsInfo(self.id, -1, physicsClientId=c)[3])
+        origin = base_pos - local                        # body frame origin in world
+        parts = []
+        for link in self.links.values():
+            ls = p.getLinkState(self.id, link, physicsClientId=c)
+            info = p.getDynamicsInfo(self.id, link, physicsClientId=c)
+            R = rot.to_matrix(np.array(ls[1]))
+            parts.append((info[0], np.array(ls[0]) - origin, R @ np.diag(info[2]) @ R.T))
+        m_arm = sum(m for m, _, _ in parts)
+        com_arm = sum(m * x for m, x, _ in parts) / m_arm
+        # body COM such that the whole COM sits at com_body
+        body_com = (self.mass * self.com_body - m_arm * com_arm) / self.body_mass
+        I_target = np.diag(self.inertia)
+        I_arm = sum(Ii + m * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+                    for m, x, Ii in parts for d in [x - self.com_body])
+        d = body_com - self.com_body
+        I_body = I_target - I_arm - self.body_mass * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+        self.body_com_offset = body_com
+        # pybullet cannot move a base's inertial frame after loading: reload with the fitted values
+        p.removeBody(self.id, physicsClientId=c)
+        path = self._write(urdf(self.body_mass, body_com, np.diag(I_body).tolist()))
+        try:
+            self.id = p.loadURDF(path, flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
+        finally:
+            os.unlink(path)
+        for j in range(-1, p.getNumJoints(self.id, physicsClientId=c)):
+            p.changeDynamics(self.id, j, linearDamping=0, angularDamping=0, physicsClientId=c,
+                             activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING)
+        self._set_joints_now()
+        self.body_inertia_fitted = np.diag(I_body)
+
+    # ---- state -------------------------------------------------------------------------
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Body-frame origin position and orientation [x,y,z,w] in the world frame."""
+        pos, q = self.p.getBasePositionAndOrientation(self.id, physicsClientId=self.client)
+        q = np.array(q)
+        return np.array(pos) - rot.rotate(q, self.body_com_offset), q
+
+    def set_pose(self, position, orientation, velocity=(0, 0, 0), omega=(0, 0, 0)) -> None:
+        q = rot.normalize(np.asarray(orientation, dtype=float))
+        com = np.asarray(position, dtype=float) + rot.rotate(q, self.body_com_offset)
+        self.p.resetBasePositionAndOrientation(self.id, com.tolist(), q.tolist(),
+                                               physicsClientId=self.client)
+        self.p.resetBaseVelocity(self.id, list(velocity), list(omega), physicsClientId=self.client)
+        self._set_joints_now()
+
+    def twist(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-frame velocity of the body origin and angular velocity (world frame)."""
+        v, w = self.p.getBaseVelocity(self.id, physicsClientId=self.client)
+        v, w = np.array(v), np.array(w)
+        _, q = self.pose()
+        return v - np.cross(w, rot.rotate(q, self.body_com_offset)), w
+
+    def com(self) -> np.ndarray:
+        pos, q = self.pose()
+        return pos + rot.rotate(q, self.com_body)
+
+    def gripper_tip(self) -> tuple[np.ndarray, np.ndarray]:
+        """World position of the grasp point between the fingers, and the gripper's +x axis."""
+        ls = self.p.getLinkState(self.id, self.links["gripper"], computeForwardKinematics=True,
+                                 physicsClientId=self.client)
+        q = np.array(ls[5])
+        pos = np.array(ls[4]) + rot.rotate(q, [GRIPPER_LEN * 0.8, 0, 0])
+        return pos, rot.rotate(q, [1.0, 0, 0])
+
+    # ---- commands ----------------------------------------------------------------------
+    def set_flight_mode(self, name: str) -> None:
+        self.mode = flight_modes.get(name)
+
+    def clip(self, wrench_body: np.ndarray) -> np.ndarray:
+        """Clip a body-frame wrench [fx fy fz tx ty tz] per axis to the flight mode's limits."""
+        w = np.asarray(wrench_body, dtype=float)
+        lim = np.concatenate([self.mode.max_force, self.mode.max_torque])
+        return np.clip(w, -lim, lim)
+
+    @staticmethod
+    def valid(wrench_body) -> bool:
+        """A finite 6-vector with no absurd component (|.| <= 100 N / N m)."""
+        w = np.asarray(wrench_body, dtype=float)
+        return w.shape == (6,) and bool(np.all(np.isfinite(w))) and bool(np.all(np.abs(w) <= MAX_ABS_WRENCH))
+
+    def command(self, wrench_body) -> bool:
+        """Set the body-frame wrench held until the next command; False (ignored) if invalid."""
+        if not self.valid(wrench_body):
+            return False
+        self.wrench_cmd = self.clip(wrench_body)
+        return True
+
+    def apply(self, zero: bool = False) -> None:
+        """Apply the held wrench (world frame, at the whole robot's COM) for the coming step."""
+        p, c = self.p, self.client
+        pos, q = p.getBasePositionAndOrientation(self.id, physicsClientId=c)
+        q = np.array(q)
+        f = np.zeros(3) if zero else rot.rotate(q, self.wrench_cmd[:3])
+        t = np.zeros(3) if zero else rot.rotate(q, self.wrench_cmd[3:])
+        com = np.array(pos) + rot.rotate(q, self.com_body - self.body_com_offset)
+        if self.drag:
+            v, _ = p.getBaseVelocity(self.id, physicsClientId=c)
+            v = np.array(v)
+            f = f - self.drag_k * np.linalg.norm(v) * v
+        if np.any(f):
+            p.applyExternalForce(self.id, -1, f.tolist(), com.tolist(), p.WORLD_FRAME, physicsClientId=c)
+        if np.any(t):
+            p.applyExternalTorque(self.id, -1, t.tolist(), p.WORLD_FRAME, physicsClientId=c)
+
+    def deploy_arm(self, deployed: bool = True, instant: bool = False) -> None:
+        k = "deployed" if deployed else "stowed"
+        a = self.cfg["arm"][k]
+        self.arm_targets = {"arm_proximal_joint": a["proximal"], "arm_distal_joint": a["distal"]}
+        self._set_joints_now() if instant else self._motors()
+
+    def gripper(self, open_: bool, instant: bool = False) -> None:
+        self.gripper_target = float(self.cfg["arm"]["gripper_open"]) / 2 if open_ else 0.0
+        self._set_joints_now() if instant else self._motors()
+
+    def joint_positions(self) -> dict[str, float]:
+        return {n: self.p.getJointState(self.id, j, physicsClientId=self.client)[0]
+                for n, j in self.joints.items() if n != "gripper_mount"}

@@ -1,0 +1,256 @@
+"""The simulation without transport: ISS walls + Astrobee(s) + an optional cargo bag in pybullet.
+
+One pybullet client per Simulation (DIRECT by default). `step()` advances one physics step with
+the held, clipped body-frame wrenches; the propulsion watchdog zeroes a robot's wrench when no
+command came for `watchdog_timeout` seconds. Deterministic for a given scenario, seed and
+command sequence.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from astrobee import config, flight_modes
+
+from .bags import Bag, BagError, make_bag
+from .robot import Robot
+from .world import World, build_pybullet
+
+
+class ScenarioError(ValueError):
+    """Unknown scenario or a scenario that cannot be built (bad bag model/variant...)."""
+
+
+@dataclass
+class Contact:
+    body_a: str
+    body_b: str
+    position: np.ndarray
+    normal: np.ndarray
+    normal_force: float
+
+
+_WORLD_CACHE: dict = {}
+
+
+def station() -> World:
+    """The procedural ISS geometry (cached: it only depends on config/iss.yaml)."""
+    if "w" not in _WORLD_CACHE:
+        _WORLD_CACHE["w"] = World.from_config()
+    return _WORLD_CACHE["w"]
+
+
+class Simulation:
+    """World + robots + bag, stepped at `physics_rate` Hz."""
+
+    def __init__(self, scenario: str | dict = "node2_to_jem", seed: int = 0,
+                 physics_rate: float = 350.0, gui: bool = False, drag: bool = False,
+                 bag_model: str | None = None, bag_variant: str | None = None,
+                 bag_resolution: int | None = None, robots: list[str] | None = None,
+                 flight_mode: str | None = None):
+        import pybullet as p
+        self.p = p
+        self.client = p.connect(p.GUI if gui else p.DIRECT)
+        self.gui = gui
+        self.dt = 1.0 / float(physics_rate)
+        self.drag = drag
+        self.world = station()
+        self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
+                          "bag_resolution": bag_resolution, "robots": robots,
+                          "flight_mode": flight_mode}
+        self.watchdog_timeout = float(config.astrobee().get("watchdog_timeout", 0.32))
+        self.robots: dict[str, Robot] = {}
+        self.bag: Bag | None = None
+        self.reset(scenario, seed)
+
+    # ---- setup ---------------------------------------------------------------------------
+    def load_scenario(self, scenario: str | dict) -> dict:
+        if isinstance(scenario, dict):
+            return scenario
+        try:
+            return config.scenario(scenario)
+        except config.ConfigError as exc:
+            raise ScenarioError(str(exc)) from exc
+
+    def reset(self, scenario: str | dict | None = None, seed: int | None = None, **overrides) -> None:
+        """Rebuild the world from a scenario (default: the current one) and a seed."""
+        self.overrides.update({k: v for k, v in overrides.items() if v is not None})
+        if scenario is None or scenario == "":
+            scenario = getattr(self, "scenario_name", "node2_to_jem")
+        sc = self.load_scenario(scenario)
+        seed = getattr(self, "seed", 0) if seed is None else int(seed)
+        bag_cfg = dict(sc.get("bag") or {})
+        o = self.overrides
+        if o.get("bag_model"):
+            if o["bag_model"] == "none":
+                bag_cfg = {}
+            else:
+                bag_cfg["model"] = o["bag_model"]
+        if bag_cfg and o.get("bag_variant"):
+            bag_cfg["variant"] = o["bag_variant"]
+        if bag_cfg and o.get("bag_resolution"):
+            bag_cfg["resolution"] = int(o["bag_resolution"])
+        mode = o.get("flight_mode") or sc.get("flight_mode")
+        try:
+            flight_modes.get(mode)
+        except flight_modes.UnknownFlightMode as exc:
+            raise ScenarioError(str(exc)) from exc
+        if bag_cfg:
+            from .bags import MODELS, handle_dirs
+            if bag_cfg.get("model", "rigid") not in MODELS:
+                raise ScenarioError(f"unknown bag model {bag_cfg.get('model')!r}; known: {', '.join(MODELS)}")
+            try:
+                handle_dirs(bag_cfg.get("variant", "front"))
+            except BagError as exc:
+                raise ScenarioError(str(exc)) from exc
+        robots_cfg = list(sc.get("robots") or [{"name": "", "position": config.waypoint("node_2").tolist(),
+                                                 "orientation": [0, 0, 0, 1]}])
+        if o.get("robots"):
+            names = list(o["robots"])
+            base = robots_cfg[0]
+            robots_cfg = [dict(robots_cfg[i]) if i < len(robots_cfg) else
+                          {**base, "position": list(np.add(base["position"], [0.7 * i, 0, 0]))}
+                          for i in range(len(names))]
+            for rc, n in zip(robots_cfg, names):
+                rc["name"] = n
+        # ---- build -----------------------------------------------------------------------
+        p, c = self.p, self.client
+        fem = bag_cfg.get("model") == "fem"
+        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD if fem else 0, physicsClientId=c)
+        p.setGravity(0, 0, 0, physicsClientId=c)
+        p.setTimeStep(self.dt, physicsClientId=c)
+        if self.gui:
+            p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=c)
+        self.wall_ids = build_pybullet(self.world, c, visuals=self.gui)
+        rng = np.random.default_rng(seed)
+        noise = float(sc.get("initial_position_noise", 0.0))
+        self.robots = {}
+        for rc in robots_cfg:
+            pos = np.asarray(rc["position"], dtype=float) + rng.normal(0, noise, 3) * (noise > 0)
+            r = Robot(c, rc.get("name", ""), pos, rc.get("orientation", [0, 0, 0, 1]), mode, self.drag)
+            self.robots[r.name] = r
+        self.bag = None
+        if bag_cfg:
+            for r in self.robots.values():
+                r.deploy_arm(True, instant=True)
+                r.gripper(False, instant=True)
+            kw = {k: bag_cfg[k] for k in ("size", "mass") if k in bag_cfg}
+            if fem and "resolution" in bag_cfg:
+                kw["resolution"] = int(bag_cfg["resolution"])
+            self.bag = make_bag(bag_cfg.get("model", "rigid"), c, bag_cfg.get("variant", "front"), **kw)
+            self.bag.attach(list(self.robots.values()))
+        if self.gui:
+            p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=c)
+        self.scenario = sc
+        self.scenario_name = scenario if isinstance(scenario, str) else sc.get("name", "custom")
+        self.seed = seed
+        self.bag_cfg = bag_cfg
+        self.flight_mode = flight_modes.get(mode)
+        self.time = 0.0
+        self.steps = 0
+        self.last_command = {n: 0.0 for n in self.robots}
+        self.fault = {n: False for n in self.robots}
+        self.rejected = 0
+
+    # ---- commands ------------------------------------------------------------------------
+    def command(self, wrench_body, robot: str = "") -> bool:
+        """Hold a body-frame wrench [fx fy fz tx ty tz] for `robot`; False if rejected."""
+        r = self.robots.get(robot)
+        if r is None or not r.command(wrench_body):
+            self.rejected += 1
+            return False
+        self.last_command[robot] = self.time
+        return True
+
+    def set_flight_mode(self, name: str) -> None:
+        """Change every robot's flight mode (raises UnknownFlightMode)."""
+        mode = flight_modes.get(name)
+        self.flight_mode = mode
+        for r in self.robots.values():
+            r.set_flight_mode(name)
+
+    # ---- stepping ------------------------------------------------------------------------
+    def step(self, n: int = 1) -> None:
+        """Advance n physics steps."""
+        p, c = self.p, self.client
+        for _ in range(n):
+            for name, r in self.robots.items():
+                if self.time - self.last_command[name] > self.watchdog_timeout + 1e-9:
+                    if not self.fault[name]:
+                        self.fault[name] = True
+                    r.wrench_cmd = np.zeros(6)
+                elif self.fault[name]:
+                    self.fault[name] = False
+                r.apply()
+            p.stepSimulation(physicsClientId=c)
+            self.time += self.dt
+            self.steps += 1
+            if self.bag is not None:
+                self.bag.after_step(self.dt)
+
+    def advance(self, duration: float) -> None:
+        self.step(max(1, int(round(duration / self.dt))))
+
+    # ---- state ---------------------------------------------------------------------------
+    def robot_state(self, robot: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(position, orientation [x,y,z,w], velocity, angular velocity), world frame."""
+        r = self.robots[robot]
+        pos, q = r.pose()
+        v, w = r.twist()
+        return pos, q, v, w
+
+    def bag_state(self):
+        return None if self.bag is None else self.bag.state()
+
+    def contacts(self) -> list[Contact]:
+        """Contacts of the robots and the bag with the station walls."""
+        p, c = self.p, self.client
+        named = [(n or "robot", r.id) for n, r in self.robots.items()]
+        if self.bag is not None:
+            named += [("bag", b) for b in self.bag.body_ids]
+        out = []
+        for name, body in named:
+            for w in self.wall_ids:
+                for cp in p.getContactPoints(bodyA=body, bodyB=w, physicsClientId=c):
+                    out.append(Contact(name, "iss", np.array(cp[6]), np.array(cp[7]), float(cp[9])))
+        return out
+
+    def clearance(self) -> tuple[float, float]:
+        """Smallest distance of the robots' envelope and of the bag to a wall (m)."""
+        half = float(config.astrobee().get("envelope", 0.32)) / 2
+        pts = np.array([r.pose()[0] for r in self.robots.values()])
+        rc = float(self.world.wall_distance(pts).min()) - half if len(pts) else -1.0
+        bc = self.world.clearance(self.bag.points()) if self.bag is not None else -1.0
+        return rc, bc
+
+    # ---- snapshot ------------------------------------------------------------------------
+    def snapshot(self) -> dict:
+        """Whole-world snapshot: rigid bodies via saveState, FEM nodes by the bag itself."""
+        sid = self.p.saveState(physicsClientId=self.client)
+        return {"state": sid, "bag": None if self.bag is None else self.bag.snapshot(),
+                "time": self.time, "steps": self.steps,
+                "cmd": {n: r.wrench_cmd.copy() for n, r in self.robots.items()},
+                "last": dict(self.last_command), "fault": dict(self.fault)}
+
+    def restore(self, snap: dict) -> None:
+        self.p.restoreState(stateId=snap["state"], physicsClientId=self.client)
+        if self.bag is not None:
+            self.bag.restore(snap["bag"])
+        self.time, self.steps = snap["time"], snap["steps"]
+        for n, r in self.robots.items():
+            r.wrench_cmd = snap["cmd"][n].copy()
+        self.last_command = dict(snap["last"])
+        self.fault = dict(snap["fault"])
+
+    def close(self) -> None:
+        try:
+            self.p.disconnect(physicsClientId=self.client)
+        except Exception:   # already gone
+            pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
