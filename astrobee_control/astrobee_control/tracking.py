@@ -87,6 +87,13 @@ class Tracker:
             self.segment_result = "STOPPED"
         self._transition(STOPPING, why)
 
+    def rehold(self, state: State, why: str) -> None:
+        """Drop any segment and hold `state`'s pose now (after a reset teleported the robot)."""
+        self.traj = None
+        self.hold = Reference.hold(state.position, state.orientation)
+        self.pd.reset()
+        self._transition(STOPPED, why)
+
     def idle(self, why: str = "idle requested") -> None:
         self.traj = None
         self.hold = None
