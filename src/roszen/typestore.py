@@ -14,7 +14,7 @@ from typing import Any, Callable
 
 from .types import convert as _convert
 from .types import rihs as _rihs
-from .types.cdr import CdrBackend, MessageDecodeError, MessageEncodeError
+from .types.cdr import CdrBackend, MessageDecodeError, MessageEncodeError, make_checker
 from .types.classes import make_class
 from .types.spec import InterfaceParseError, MsgSpec, SrvSpec, parse_msg, parse_srv
 from .types.spec import Constant, Field, FieldType
@@ -46,6 +46,7 @@ _classes: dict[str, type] = {}
 _hashes: dict[str, str] = {}
 _serializers: dict[str, Callable[[Any], bytes]] = {}
 _deserializers: dict[str, Callable[[Any], Any]] = {}
+_checkers: dict[str, Any] = {}
 _rosbags_defs: dict | None = None
 _backend: CdrBackend | None = None
 
@@ -303,7 +304,8 @@ def _make_serializer(name: str) -> Callable[[Any], bytes]:
         full = _prepare(name)
         fn = _serializers.get(full)
         if fn is None:
-            fn = _get_backend().serializer(full, _convert.coerce)
+            checker = make_checker(get_spec(full), get_spec, _checkers)
+            fn = _get_backend().serializer(full, _convert.coerce, checker)
             _serializers[full] = fn
         _serializers[name] = fn
         return fn

@@ -26,7 +26,7 @@ MAX_SEQUENCE = 1 << 28
 
 
 def _desc(t: FieldType) -> tuple:
-    base = "uint8" if t.base == "char" else ("string" if t.base == "wstring" else t.base)
+    base = {"char": "uint8", "byte": "uint8", "wstring": "string"}.get(t.base, t.base)
     if t.is_primitive:
         sub = (Nodetype.BASE, (base, t.string_bound))
     else:
@@ -51,13 +51,16 @@ class CdrBackend:
         self.store.fielddefs[spec.name] = ([], fields)
         self.store.types[spec.name] = cls
 
-    def serializer(self, name: str, coerce: Callable[[object], object]) -> Callable[[object], bytes]:
+    def serializer(self, name: str, coerce: Callable[[object], object],
+                   checker: Callable[[object], bool] | None) -> Callable[[object], bytes]:
         store = self.store
         msgdef = store.get_msgdef(name)
         getsize, ser, cls = msgdef.getsize_cdr, msgdef.serialize_cdr_le, msgdef.cls
 
         def serialize(msg: object) -> bytes:
             try:
+                if checker is not None and not checker(msg):
+                    raise TypeError("field values need conversion")
                 size = getsize(0, msg, store)
                 buf = bytearray(size + 4)
                 buf[1] = 1
@@ -104,3 +107,59 @@ class CdrBackend:
             return msg
 
         return deserialize
+
+
+def make_checker(spec: MsgSpec, lookup: Callable[[str], MsgSpec],
+                 cache: dict[str, Callable[[object], bool] | None]) -> Callable[[object], bool] | None:
+    """A fast check that every numpy field has the exact dtype and every bound is respected.
+
+    rosbags' codegen copies array bytes as they are (an int64 array in a float64 field would be
+    sent as garbage) and ignores bounds; a failed check sends the message through the
+    validating converter instead. None when the type has nothing to check.
+    """
+    from .classes import DTYPES, attr_name
+
+    if spec.name in cache:
+        return cache[spec.name]
+    cache[spec.name] = None  # provisional (no recursive types in ROS, but be safe)
+    ns: dict[str, object] = {"_nd": __import__("numpy").ndarray}
+    lines: list[str] = []
+    for i, f in enumerate(spec.fields):
+        t, a = f.type, attr_name(f.name)
+        if t.is_primitive:
+            if t.base in DTYPES and t.is_container:
+                ns[f"_t{i}"] = DTYPES[t.base]
+                lines.append(f"    v = m.{a}")
+                lines.append(f"    if type(v) is not _nd or v.dtype != _t{i} or v.ndim != 1: return False")
+                if t.kind == "bseq":
+                    lines.append(f"    if len(v) > {t.size}: return False")
+            elif t.base in ("string", "wstring") and (t.string_bound or t.kind == "bseq"):
+                lines.append(f"    v = m.{a}")
+                if t.kind == "bseq":
+                    lines.append(f"    if len(v) > {t.size}: return False")
+                if t.string_bound:
+                    if t.kind == "scalar":
+                        lines.append(f"    if len(v) > {t.string_bound}: return False")
+                    else:
+                        lines.append(f"    if any(len(x) > {t.string_bound} for x in v): return False")
+            continue
+        sub = make_checker(lookup(t.base), lookup, cache)
+        if sub is None and t.kind != "bseq":
+            continue
+        ns[f"_c{i}"] = sub
+        lines.append(f"    v = m.{a}")
+        if t.kind == "bseq":
+            lines.append(f"    if len(v) > {t.size}: return False")
+        if sub is not None:
+            if t.kind == "scalar":
+                lines.append(f"    if not _c{i}(v): return False")
+            else:
+                lines.append(f"    for x in v:")
+                lines.append(f"        if not _c{i}(x): return False")
+    if not lines:
+        cache[spec.name] = None
+        return None
+    code = "def check(m):\n" + "\n".join(lines) + "\n    return True\n"
+    exec(compile(code, f"<roszen check {spec.name}>", "exec"), ns)  # noqa: S102
+    cache[spec.name] = ns["check"]
+    return ns["check"]
