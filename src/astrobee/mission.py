@@ -245,7 +245,8 @@ class MissionClient:
         req.flight_mode = fm.name
         req.face_forward = bool(scen.get("face_forward", False))
         bag = scen.get("bag") or {}
-        req.carry_extent = float(max(bag.get("size", [0.0]))) if bag else 0.0
+        # the bag trails along the path: extra margin only where a scenario asks for it
+        req.carry_extent = float(scen.get("carry_extent", 0.0)) if bag else 0.0
         progress.update(f"[mission] {name}: planning")
         plan = self.call(self.planner, req, 120.0, "/mob/planner/global")
         res.planning_time = float(plan.planning_time)
