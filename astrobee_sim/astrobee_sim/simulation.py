@@ -34,11 +34,15 @@ class Contact:
 _WORLD_CACHE: dict = {}
 
 
-def station() -> World:
-    """The procedural ISS geometry (cached: it only depends on config/iss.yaml)."""
-    if "w" not in _WORLD_CACHE:
-        _WORLD_CACHE["w"] = World.from_config()
-    return _WORLD_CACHE["w"]
+def station(wall_thickness: float = 0.25) -> World:
+    """The procedural ISS geometry (cached per thickness: it only depends on config/iss.yaml).
+
+    The sim's walls are thicker than iss.yaml's 5 cm so a soft-body node pushed hard into a wall
+    (penetration up to a few cm measured) can never come out on the far side.
+    """
+    if wall_thickness not in _WORLD_CACHE:
+        _WORLD_CACHE[wall_thickness] = World.from_config(thickness=wall_thickness)
+    return _WORLD_CACHE[wall_thickness]
 
 
 class Simulation:
@@ -48,14 +52,14 @@ class Simulation:
                  physics_rate: float = 350.0, gui: bool = False, drag: bool = False,
                  bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, robots: list[str] | None = None,
-                 flight_mode: str | None = None):
+                 flight_mode: str | None = None, wall_thickness: float = 0.25):
         import pybullet as p
         self.p = p
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.gui = gui
         self.dt = 1.0 / float(physics_rate)
         self.drag = drag
-        self.world = station()
+        self.world = station(wall_thickness)
         self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
                           "bag_resolution": bag_resolution, "robots": robots,
                           "flight_mode": flight_mode}
@@ -174,7 +178,7 @@ class Simulation:
     def step(self, n: int = 1) -> None:
         """Advance n physics steps."""
         p, c = self.p, self.client
-        for _ in range(n):
+        for i in range(n):
             for name, r in self.robots.items():
                 if self.time - self.last_command[name] > self.watchdog_timeout + 1e-9:
                     if not self.fault[name]:
@@ -187,7 +191,7 @@ class Simulation:
             self.time += self.dt
             self.steps += 1
             if self.bag is not None:
-                self.bag.after_step(self.dt)
+                self.bag.after_step(self.dt, sample=i >= n - 2)
 
     def advance(self, duration: float) -> None:
         self.step(max(1, int(round(duration / self.dt))))

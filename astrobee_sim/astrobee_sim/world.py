@@ -120,26 +120,33 @@ def module_colour(name: str) -> tuple[float, float, float]:
     return MODULE_COLOURS.get(name.split("/")[0], (0.8, 0.8, 0.8))
 
 
-def build_pybullet(world: World, client: int, visuals: bool = False) -> list[int]:
-    """Add the wall slabs to a pybullet client as static bodies (one per slab); returns their ids.
+def build_pybullet(world: World, client: int, visuals: bool = False,
+                   per_body: int = 64) -> list[int]:
+    """Add the wall slabs to a pybullet client as a few static compound bodies; returns their ids.
 
-    Static rigid bodies (maximal coordinates) cost almost nothing per step; multibodies with
-    many fixed links, or one multibody per slab, cost ~100 us a step here (measured).
+    Each body holds up to `per_body` box children (convex, so soft-body contacts work). Measured
+    here: 322 separate static bodies cost ~22 us a physics step, 6 compounds ~3 us, and
+    multibodies with fixed links far more.
     """
     import pybullet as p
     ids = []
     owner = _slab_module(world)
-    for k, s in enumerate(world.walls):
-        half = ((s[3:] - s[:3]) / 2).tolist()
-        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
+    w = world.walls
+    half = ((w[:, 3:] - w[:, :3]) / 2).tolist()
+    pos = ((w[:, 3:] + w[:, :3]) / 2).tolist()
+    for k in range(0, len(w), per_body):
+        sl = slice(k, k + per_body)
+        n = len(half[sl])
+        col = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=half[sl],
+                                          collisionFramePositions=pos[sl], physicsClientId=client)
         vis = -1
         if visuals:
-            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client,
-                                      rgbaColor=[*module_colour(owner[k]), 0.35])
+            vis = p.createVisualShapeArray(
+                [p.GEOM_BOX] * n, halfExtents=half[sl], visualFramePositions=pos[sl],
+                rgbaColors=[[*module_colour(o), 0.35] for o in owner[sl]], physicsClientId=client)
         ids.append(p.createMultiBody(baseMass=0, baseCollisionShapeIndex=col,
-                                     baseVisualShapeIndex=vis,
-                                     basePosition=((s[3:] + s[:3]) / 2).tolist(),
-                                     useMaximalCoordinates=True, physicsClientId=client))
+                                     baseVisualShapeIndex=vis, useMaximalCoordinates=True,
+                                     physicsClientId=client))
     return ids
 
 
