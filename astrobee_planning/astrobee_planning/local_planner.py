@@ -1,0 +1,104 @@
+"""Local planner: one quintic Bezier + one quintic quaternion polynomial between two full states.
+
+Position: with position, velocity and acceleration given at both ends, the minimum-integrated-
+squared-jerk curve is the quintic, i.e. a degree-5 Bezier whose six control points are fixed by
+the boundary values (closed form, no solve; a degree-7 curve with free interior points would
+reduce to the same quintic):
+    P0 = p0, P1 = p0 + v0 T/5, P2 = p0 + 2 v0 T/5 + a0 T^2/20   (and mirrored at the end).
+Attitude: the quintic quaternion polynomial of quaternion_poly (world-frame rates).
+`plan_batch` does N plans at once (vectorised) for the sampling MPC.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from astrobee import rotations as rot
+
+from . import bezier
+from .quaternion_poly import _H, QuaternionPolynomial
+from .trajectory import BezierPiece, Trajectory
+
+_HT = np.ascontiguousarray(_H)
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return rot.multiply(a, b)
+
+
+def control_points(p0, v0, a0, p1, v1, a1, duration) -> np.ndarray:
+    """Quintic Bezier control points (..., 6, 3); all inputs broadcast over leading axes."""
+    T = np.asarray(duration, dtype=float)[..., None]
+    p0, v0, a0, p1, v1, a1 = (np.asarray(x, dtype=float) for x in (p0, v0, a0, p1, v1, a1))
+    P1 = p0 + v0 * T / 5.0
+    P2 = p0 + 2.0 * v0 * T / 5.0 + a0 * T * T / 20.0
+    P4 = p1 - v1 * T / 5.0
+    P3 = p1 - 2.0 * v1 * T / 5.0 + a1 * T * T / 20.0
+    return np.stack(np.broadcast_arrays(p0, P1, P2, P3, P4, p1), axis=-2)
+
+
+def quaternion_coefficients(q0, w0, al0, q1, w1, al1, duration) -> np.ndarray:
+    """Quintic quaternion polynomial coefficients (..., 6, 4) (world-frame rates); q1 is taken on
+    q0's hemisphere."""
+    q0 = np.asarray(q0, dtype=float)
+    q1 = np.asarray(q1, dtype=float)
+    q0 = q0 / np.linalg.norm(q0, axis=-1, keepdims=True)
+    q1 = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
+    q1 = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -q1, q1)
+    T = np.asarray(duration, dtype=float)[..., None]
+    w0, al0, w1, al1 = (np.asarray(x, dtype=float) for x in (w0, al0, w1, al1))
+    z = np.zeros(w0.shape[:-1] + (1,))
+    pw0 = np.concatenate([w0, z], -1)
+    pw1 = np.concatenate([w1, np.zeros(w1.shape[:-1] + (1,))], -1)
+    pa0 = np.concatenate([al0, np.zeros(al0.shape[:-1] + (1,))], -1)
+    pa1 = np.concatenate([al1, np.zeros(al1.shape[:-1] + (1,))], -1)
+    d0 = 0.5 * _qmul(pw0, q0)
+    d1 = 0.5 * _qmul(pw1, q1)
+    dd0 = 0.5 * _qmul(pa0, q0) - 0.25 * np.sum(w0 * w0, -1, keepdims=True) * q0
+    dd1 = 0.5 * _qmul(pa1, q1) - 0.25 * np.sum(w1 * w1, -1, keepdims=True) * q1
+    f = np.stack(np.broadcast_arrays(q0, T * d0, T * T * dd0, q1, T * d1, T * T * dd1), axis=-2)
+    return np.einsum("ij,...jk->...ik", _HT, f)
+
+
+def plan(start, goal, duration: float, t0: float = 0.0) -> Trajectory:
+    """One-piece trajectory between two full states (dicts or State-like objects with pos, vel,
+    acc, quat, omega, alpha; world-frame rates) over `duration` seconds."""
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError("duration must be positive and finite")
+    g = lambda s, k: np.asarray(s[k] if isinstance(s, dict) else getattr(s, k), dtype=float)  # noqa: E731
+    vals = [g(start, k) for k in ("pos", "vel", "acc", "quat", "omega", "alpha")] + \
+           [g(goal, k) for k in ("pos", "vel", "acc", "quat", "omega", "alpha")]
+    for v in vals:
+        if not np.all(np.isfinite(v)):
+            raise ValueError("states must be finite")
+    for q in (vals[3], vals[9]):
+        if abs(np.linalg.norm(q) - 1.0) > 1e-3:
+            raise ValueError("quaternions must have unit norm")
+    p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1 = vals
+    pts = control_points(p0, v0, a0, p1, v1, a1, duration)
+    coef = quaternion_coefficients(q0, w0, al0, q1, w1, al1, duration)
+    return Trajectory([BezierPiece(pts, float(t0), float(duration))],
+                      [QuaternionPolynomial(coef, float(t0), float(duration))])
+
+
+def plan_batch(p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1, durations
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """N plans at once: (control points (N, 6, 3), quaternion coefficients (N, 6, 4))."""
+    return (control_points(p0, v0, a0, p1, v1, a1, durations),
+            quaternion_coefficients(q0, w0, al0, q1, w1, al1, durations))
+
+
+def evaluate_batch(points: np.ndarray, coefficients: np.ndarray, durations: np.ndarray,
+                   s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, velocities, accelerations (N, M, 3) and unit quaternions (N, M, 4) of N local
+    plans at M normalised times s in [0, 1]."""
+    s = np.asarray(s, dtype=float)
+    B = bezier.bernstein(5, s)                          # (M, 6)
+    B1 = bezier.bernstein(4, s) @ bezier.difference_matrix(5, 1)
+    B2 = bezier.bernstein(3, s) @ bezier.difference_matrix(5, 2)
+    T = np.asarray(durations, dtype=float)[:, None, None]
+    pos = np.einsum("mi,nik->nmk", B, points)
+    vel = np.einsum("mi,nik->nmk", B1, points) / T
+    acc = np.einsum("mi,nik->nmk", B2, points) / T**2
+    q = np.einsum("mj,njk->nmk", s[:, None] ** np.arange(6), coefficients)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return pos, vel, acc, q
