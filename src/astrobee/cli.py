@@ -1,0 +1,91 @@
+"""The `astrobee` command: `run`, `launch`, `router` and the ros2-style verbs of roszen.cli.
+
+    astrobee run astrobee_sim sim_node --ros-args -p scenario:=node2_to_jem
+    astrobee launch cargo_transport [name:=value ...] [--port 7447]
+    astrobee topic list | echo /mob/state | ...   (see `astrobee -h`)
+"""
+from __future__ import annotations
+
+import sys
+
+from roszen.cli import main as roszen_main
+from roszen.cli.common import CliError, line_buffered
+
+# The project's node executables, found by `astrobee run` when no colcon install has them.
+NODES: dict[tuple[str, str], str] = {
+    ("astrobee_sim", "sim_node"): "astrobee_sim.sim_node:main",
+    ("astrobee_planning", "planner_node"): "astrobee_planning.planner_node:main",
+    ("astrobee_control", "pd_controller_node"): "astrobee_control.pd_controller_node:main",
+    ("astrobee_control", "mpc_controller_node"): "astrobee_control.mpc_controller_node:main",
+}
+
+USAGE = """usage: astrobee <command> [args]
+
+commands:
+  run PKG EXE [--ros-args ...]   start one node (like `ros2 run`)
+  launch NAME [arg:=value ...]   start a launch description (astrobee/launch/NAME.py)
+  router [--port P]              run the Zenoh router (rmw_zenohd equivalent)
+  topic | service | node | interface | bag   ros2-style verbs (`astrobee topic -h`)
+"""
+
+
+def _launch(argv: list[str]) -> int:
+    import argparse
+    from astrobee import launcher
+
+    p = argparse.ArgumentParser(prog="astrobee launch",
+                                description="Start a launch description's nodes.")
+    p.add_argument("name", nargs="?", help="launch description (module in astrobee/launch/ "
+                   "or a .py file)")
+    p.add_argument("args", nargs="*", help="launch arguments name:=value")
+    p.add_argument("--port", type=int, default=7447, help="router port (default 7447)")
+    p.add_argument("--run-dir", help="directory for params and the bag (default runs/<time>)")
+    p.add_argument("--ros2", dest="ros2", action="store_true", default=None,
+                   help="start nodes with `ros2 run` (default: when ros2 + rmw_zenoh found)")
+    p.add_argument("--no-ros2", dest="ros2", action="store_false")
+    p.add_argument("--demo", action="store_true", help="shorthand for demo:=true")
+    p.add_argument("--list", action="store_true", help="list launch descriptions")
+    p.add_argument("--sigint-timeout", type=float, default=5.0,
+                   help="seconds a child gets to exit after SIGINT before SIGTERM (default 5)")
+    p.add_argument("--sigterm-timeout", type=float, default=3.0,
+                   help="seconds after SIGTERM before SIGKILL (default 3)")
+    a = p.parse_args(argv)
+    if a.list or not a.name:
+        print("\n".join(launcher.list_descriptions()))
+        return 0 if a.list else 2
+    arguments = {}
+    for item in a.args:
+        key, sep, value = item.partition(":=")
+        if not sep or not key:
+            raise CliError(f"launch argument must be name:=value, got '{item}'")
+        arguments[key] = value
+    if a.demo:
+        arguments.setdefault("demo", "true")
+    from pathlib import Path
+    try:
+        return launcher.launch(a.name, arguments, port=a.port, use_ros2=a.ros2,
+                               run_dir=Path(a.run_dir) if a.run_dir else None, registry=NODES,
+                               sigint_timeout=a.sigint_timeout,
+                               sigterm_timeout=a.sigterm_timeout)
+    except launcher.LaunchError as exc:
+        raise CliError(str(exc)) from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the `astrobee` console command."""
+    line_buffered()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(USAGE, end="")
+        return 0 if argv else 2
+    if argv[0] == "launch":
+        try:
+            return _launch(argv[1:])
+        except CliError as exc:
+            print(f"astrobee launch: {exc}", file=sys.stderr)
+            return 1
+    return roszen_main(argv, prog="astrobee", registry=NODES)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Launch descriptions: modules with `generate_nodes(ctx) -> list[NodeSpec]` (see launcher)."""

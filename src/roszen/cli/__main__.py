@@ -1,0 +1,5 @@
+import sys
+
+from roszen.cli import main
+
+sys.exit(main(prog="roszen"))

@@ -1,0 +1,121 @@
+"""Shared pieces of the command verbs: the one-line error type and line-buffered output."""
+from __future__ import annotations
+
+import sys
+
+
+class CliError(Exception):
+    """A user error: printed as one line `<prog>: <message>`, exit status 1."""
+
+
+def line_buffered() -> None:
+    """Flush stdout at every newline (tests and pipes read the output line by line)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(line_buffering=True)
+        except (AttributeError, ValueError):
+            pass
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a float > 0 (rates, periods)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise CliError(f"not a number: {text!r}") from None
+    if not value > 0.0 or value == float("inf"):
+        raise CliError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def add_qos_args(p, default_reliability: str | None = None) -> None:
+    """--qos-profile/-depth/-history/-reliability/-durability like `ros2 topic`."""
+    p.add_argument("--qos-profile", choices=["system_default", "sensor_data", "services_default",
+                                             "parameters", "parameter_events", "action_status_default"],
+                   help="QoS preset")
+    p.add_argument("--qos-depth", type=int, help="queue size (KEEP_LAST)")
+    p.add_argument("--qos-history", choices=["system_default", "keep_last", "keep_all"])
+    p.add_argument("--qos-reliability", choices=["system_default", "reliable", "best_effort"],
+                   default=default_reliability)
+    p.add_argument("--qos-durability", choices=["system_default", "transient_local", "volatile"])
+
+
+def qos_from_args(args, base=None):
+    """The QoSProfile chosen by the --qos-* options on top of `base` (default: depth 10)."""
+    from roszen.qos import Durability, History, QoSProfile, Reliability
+    q = base or QoSProfile(depth=10)
+    if args.qos_profile == "sensor_data":
+        q = QoSProfile(depth=5, reliability=Reliability.BEST_EFFORT)
+    elif args.qos_profile in ("parameter_events",):
+        q = QoSProfile(depth=1000)
+    elif args.qos_profile == "parameters":
+        q = QoSProfile(depth=1000)
+    kw = {}
+    if args.qos_depth is not None:
+        if args.qos_depth < 0:
+            raise CliError(f"--qos-depth must be >= 0, got {args.qos_depth}")
+        kw["depth"] = args.qos_depth
+    if args.qos_history:
+        kw["history"] = History[args.qos_history.upper()]
+    if args.qos_reliability:
+        kw["reliability"] = Reliability[args.qos_reliability.upper()]
+    if args.qos_durability:
+        kw["durability"] = Durability[args.qos_durability.upper()]
+    return q.with_(**kw) if kw else q
+
+
+def make_node(prefix: str = "_roszen_cli"):
+    """A hidden helper node for one command, graph ready (the discovery `get` answered)."""
+    import os
+
+    from roszen.node import Node
+    from roszen.zconfig import ConfigError
+    try:
+        node = Node(f"{prefix}_{os.getpid()}", start_parameter_services=False,
+                    enable_rosout=False)
+    except ConfigError as exc:
+        raise CliError(str(exc)) from None
+    except Exception as exc:   # zenoh cannot open the session (router unreachable, bad config)
+        raise CliError(f"cannot join the ROS graph: {exc}") from None
+    node.context.graph.wait_ready(3.0)
+    return node
+
+
+def fq_name(name: str) -> str:
+    """Topic/service names on the command line are taken as absolute ('/x' for 'x')."""
+    name = name.strip()
+    if not name:
+        raise CliError("empty name")
+    return name if name.startswith("/") else "/" + name
+
+
+def parse_yaml_values(text: str | None, type_name: str, factory):
+    """Build a message from the YAML of the command line; CliError naming the bad part."""
+    import yaml
+    try:
+        data = yaml.safe_load(text) if text and text.strip() else {}
+    except yaml.YAMLError as exc:
+        first = str(exc).replace("\n", " ")
+        raise CliError(f"the passed value is not valid YAML: {first}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise CliError(f"the passed value must be a YAML mapping of the fields of {type_name}, "
+                       f"got {data!r}")
+    try:
+        return factory(data)
+    except (ValueError, TypeError, KeyError, AttributeError, OverflowError) as exc:
+        raise CliError(f"Failed to populate field of {type_name}: {exc}".replace("\n", " ")) \
+            from None
+
+
+def spin_until(node, done, timeout: float | None = None) -> bool:
+    """Spin `node` until done() is true (or timeout); True when done."""
+    import time
+    deadline = None if timeout is None else time.monotonic() + timeout
+    while not done():
+        left = None if deadline is None else deadline - time.monotonic()
+        if left is not None and left <= 0:
+            return False
+        node.spin_once(timeout_sec=0.05 if left is None else min(0.05, left))
+    return True

@@ -1,0 +1,133 @@
+"""Fixtures for the command-line tests: the installed `astrobee` command, free ports, and
+child processes that are always killed (process groups) at the end of a test."""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ASTROBEE = str(Path(sys.executable).parent / "astrobee")
+HERE = Path(__file__).resolve().parent
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # a zombie is dead for our purposes
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+class Proc:
+    """A child process whose output lines are collected by a thread."""
+
+    def __init__(self, argv, env=None, cwd=None):
+        self.argv = argv
+        self.popen = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      stdin=subprocess.DEVNULL, env=env, cwd=cwd,
+                                      start_new_session=True)
+        self.lines: list[str] = []
+        self.err: list[str] = []
+        self._cv = threading.Condition()
+        self._t = [threading.Thread(target=self._read, args=(self.popen.stdout, self.lines),
+                                    daemon=True),
+                   threading.Thread(target=self._read, args=(self.popen.stderr, self.err),
+                                    daemon=True)]
+        for t in self._t:
+            t.start()
+
+    def _read(self, stream, sink):
+        for raw in iter(stream.readline, b""):
+            with self._cv:
+                sink.append(raw.decode("utf-8", "replace").rstrip("\n"))
+                self._cv.notify_all()
+        with self._cv:
+            self._cv.notify_all()
+
+    def wait_line(self, pred, timeout=15.0, stream="out"):
+        """First output line for which pred(line) is true, or AssertionError after timeout."""
+        sink = self.lines if stream == "out" else self.err
+        if isinstance(pred, str):
+            text = pred
+            pred = lambda line: text in line  # noqa: E731
+        deadline = time.monotonic() + timeout
+        with self._cv:
+            seen = 0
+            while True:
+                for line in sink[seen:]:
+                    if pred(line):
+                        return line
+                seen = len(sink)
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"timeout waiting for output of {self.argv[:4]}; "
+                                         f"stdout={self.lines[-20:]} stderr={self.err[-20:]}")
+                self._cv.wait(min(left, 0.1))
+
+    def wait(self, timeout=20.0) -> int:
+        rc = self.popen.wait(timeout=timeout)
+        for t in self._t:
+            t.join(timeout=2)
+        return rc
+
+    def signal(self, sig):
+        self.popen.send_signal(sig)
+
+    def kill(self):
+        if self.popen.poll() is None:
+            try:
+                os.killpg(self.popen.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.popen.wait(timeout=5)
+
+
+@pytest.fixture
+def procs():
+    """Start processes with procs(argv, env=...); all are killed at the end of the test."""
+    started: list[Proc] = []
+
+    def start(argv, env=None, cwd=None) -> Proc:
+        p = Proc(argv, env=env, cwd=cwd)
+        started.append(p)
+        return p
+
+    yield start
+    for p in started:
+        p.kill()
+
+
+@pytest.fixture
+def port():
+    return free_port()
+
+
+def graph_env(port: int) -> dict:
+    """Environment that makes every roszen process use the router on `port`."""
+    env = dict(os.environ)
+    env["ZENOH_CONFIG_OVERRIDE"] = f'connect/endpoints=["tcp/127.0.0.1:{port}"]'
+    env["PYTHONUNBUFFERED"] = "1"
+    env.pop("ZENOH_SESSION_CONFIG_URI", None)
+    env.pop("RMW_IMPLEMENTATION", None)
+    return env

@@ -1,0 +1,132 @@
+"""The launcher from a shell: children prefixed, stopped on signals and on a required node's
+death (SIGINT, SIGTERM, SIGKILL escalation), non-zero exit on failure, nothing left running."""
+from __future__ import annotations
+
+import re
+import signal
+import time
+
+import pytest
+
+from astrobee.launcher import Launcher, LaunchError, NodeSpec
+from conftest import ASTROBEE, HERE, graph_env, pid_alive
+
+FAKE = str(HERE / "launch_files" / "fake_graph.py")
+pytestmark = pytest.mark.graph
+
+
+def _pids(proc) -> dict[str, int]:
+    out = {}
+    for line in proc.lines:
+        m = re.search(r"started '(\w+)' \(pid (\d+)\)", line)
+        if m:
+            out[m.group(1)] = int(m.group(2))
+    return out
+
+
+def _launch(procs, port, tmp_path, nodes, *extra):
+    return procs([ASTROBEE, "launch", FAKE, f"nodes={nodes}".replace("=", ":="),
+                  "--port", str(port), "--run-dir", str(tmp_path / "run"),
+                  "--sigint-timeout", "2", "--sigterm-timeout", "2", *extra],
+                 env=graph_env(port))
+
+
+def _all_dead(pids, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not any(pid_alive(p) for p in pids):
+            return True
+        time.sleep(0.05)
+    return [p for p in pids if pid_alive(p)]
+
+
+def test_required_node_death_stops_everything(procs, port, tmp_path):
+    p = _launch(procs, port, tmp_path, "sleep,crash")
+    rc = p.wait(timeout=30)
+    assert rc != 0
+    out = "\n".join(p.lines)
+    assert "[crash1]" in out and "crashing now" in out
+    assert "'crash1' exited with code 3" in out
+    assert "failed: crash1" in out
+    pids = _pids(p)
+    assert set(pids) == {"router", "sleep0", "crash1"}
+    assert _all_dead(pids.values()) is True
+
+
+def test_optional_node_failure_keeps_running_then_nonzero(procs, port, tmp_path):
+    p = _launch(procs, port, tmp_path, "sleep,optional_crash")
+    p.wait_line("'optional_crash1' exited with code 3")
+    time.sleep(0.3)
+    assert p.popen.poll() is None          # a non-required node does not stop the launch
+    p.signal(signal.SIGINT)
+    assert p.wait(timeout=30) == 1         # ... but the launch reports the failure
+    assert _all_dead(_pids(p).values()) is True
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_stops_children_cleanly(procs, port, tmp_path, sig):
+    p = _launch(procs, port, tmp_path, "sleep,noint")
+    p.wait_line("[noint1]")
+    p.wait_line("[sleep0]")
+    p.signal(sig)
+    rc = p.wait(timeout=30)
+    pids = _pids(p)
+    assert _all_dead(pids.values()) is True
+    assert rc == 0, p.lines[-10:]
+    assert f"received {sig.name}" in "\n".join(p.lines)
+
+
+def test_child_ignoring_sigterm_is_killed_and_reported(procs, port, tmp_path):
+    p = _launch(procs, port, tmp_path, "noterm")
+    p.wait_line("[noterm0]")
+    p.signal(signal.SIGTERM)
+    assert p.wait(timeout=30) == 1
+    assert "ignored SIGINT and SIGTERM: SIGKILL" in "\n".join(p.lines)
+    assert _all_dead(_pids(p).values()) is True
+
+
+def test_existing_router_is_reused(procs, port, tmp_path):
+    router = procs([ASTROBEE, "router", "--port", str(port)], env=graph_env(port))
+    router.wait_line("running", stream="err")
+    p = _launch(procs, port, tmp_path, "crash")
+    assert p.wait(timeout=30) == 1
+    assert "already listens" in "\n".join(p.lines)
+    assert router.popen.poll() is None     # not ours: left alone
+
+
+def test_missing_node_module_fails_clearly_before_starting(tmp_path):
+    spec = NodeSpec("ghost", "astrobee_control", "ghost_node")
+    launcher = Launcher([spec], registry={("astrobee_control", "ghost_node"):
+                                          "astrobee_control.ghost_node:main"})
+    with pytest.raises(LaunchError, match="cannot import astrobee_control.ghost_node"):
+        launcher.run()
+    assert launcher.procs == []
+
+
+def test_unknown_description_and_bad_argument(procs, tmp_path):
+    p = procs([ASTROBEE, "launch", "no_such_launch"])
+    assert p.wait() == 1
+    assert len(p.err) == 1 and "no launch description 'no_such_launch'" in p.err[0]
+    p = procs([ASTROBEE, "launch", FAKE, "nodes=sleep"])
+    assert p.wait() == 1
+    assert len(p.err) == 1 and "name:=value" in p.err[0]
+
+
+def test_cargo_transport_lists_the_graph(tmp_path):
+    from astrobee.launch import cargo_transport
+    from astrobee.launcher import LaunchContext, find_config_dir
+    ctx = LaunchContext({"scenario": "node2_to_jem"}, find_config_dir(), tmp_path, False, 7447)
+    specs = cargo_transport.generate_nodes(ctx)
+    names = [s.name for s in specs]
+    assert names == ["router", "sim_node", "planner_node", "pd_controller_node", "recorder"]
+    launcher = Launcher(specs, astrobee_cmd=["astrobee"])
+    argv = launcher.argv_for(specs[3])
+    assert argv[:4] == ["astrobee", "run", "astrobee_control", "pd_controller_node"]
+    params = argv[argv.index("--params-file") + 1]
+    assert "ros__parameters" in open(params).read()
+    ros2 = Launcher(specs, use_ros2=True)
+    assert ros2.argv_for(specs[1])[:4] == ["ros2", "run", "astrobee_sim", "sim_node"]
+    assert ros2.argv_for(specs[0]) == ["ros2", "run", "rmw_zenoh_cpp", "rmw_zenohd"]
+    with pytest.raises(LaunchError, match="unknown scenario"):
+        cargo_transport.generate_nodes(LaunchContext({"scenario": "nope"}, find_config_dir(),
+                                                     tmp_path, False, 7447))
