@@ -43,19 +43,21 @@ class CdrBackend:
 
     def __init__(self) -> None:
         self.store = Typestore(max_sequence_length=MAX_SEQUENCE)
+        self.classes: dict[str, type] = {}
 
     def add(self, spec: MsgSpec, cls: type) -> None:
         from .classes import attr_name
 
         fields = [(attr_name(f.name), _desc(f.type)) for f in spec.wire_fields()]
         self.store.fielddefs[spec.name] = ([], fields)
-        self.store.types[spec.name] = cls
+        self.store.types[spec.name] = cls._from_values  # rosbags calls it as cls(*values)
+        self.classes[spec.name] = cls
 
     def serializer(self, name: str, coerce: Callable[[object], object],
                    checker: Callable[[object], bool] | None) -> Callable[[object], bytes]:
         store = self.store
         msgdef = store.get_msgdef(name)
-        getsize, ser, cls = msgdef.getsize_cdr, msgdef.serialize_cdr_le, msgdef.cls
+        getsize, ser, cls = msgdef.getsize_cdr, msgdef.serialize_cdr_le, self.classes[name]
 
         def serialize(msg: object) -> bytes:
             try:

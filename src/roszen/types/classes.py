@@ -126,6 +126,13 @@ def make_class(spec: MsgSpec, nested: Callable[[str], type]) -> type:
     for c in spec.constants:
         members[c.name] = c.value
     cls = type(cls_name, (), members)
+    # fast constructor for the decoder: values in wire-field order, no default handling
+    wire = [attr_name(f.name) for f in spec.fields]
+    fcode = (f"def _from_values({', '.join(wire) or '_dummy=0'}):\n    o = _new(_cls)\n"
+             + "".join(f"    o.{a} = {a}\n" for a in wire) + "    return o\n")
+    fns: dict[str, object] = {"_new": object.__new__, "_cls": cls}
+    exec(compile(fcode, f"<roszen decoder {spec.name}>", "exec"), fns)  # noqa: S102
+    cls._from_values = staticmethod(fns["_from_values"])
     cls.__module__ = f"roszen.msg.{spec.package}"
     cls.__qualname__ = cls_name
     cls.__doc__ = f"ROS 2 message {spec.name}."
