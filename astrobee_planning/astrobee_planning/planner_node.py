@@ -1,0 +1,151 @@
+"""planner_node: /mob/planner/global and /mob/planner/local services, /mob/planner/path (latched).
+
+Thin wiring over planner.plan_global and local_planner.plan; bad requests get a failure response
+with an Astrobee Motion result code and a message, and the node keeps serving.
+Parameters: sample_rate (Hz, default 10), flight_mode (default when a request names none and
+no /mob/flight_mode was received).
+"""
+from __future__ import annotations
+
+import sys
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+import roszen
+from roszen import Durability, QoSProfile
+
+from astrobee import config
+
+from . import conversions as cv
+from . import local_planner, planner
+from .planner import INVALID_COMMAND, PLAN_FAILED, SUCCESS, PlanError
+
+
+class PlannerNode:
+    def __init__(self, argv: list[str] | None = None):
+        self.node = roszen.Node("planner_node", argv=argv)
+        self.log = self.node.get_logger()
+        self.sample_rate = float(self.node.declare_parameter("sample_rate", 10.0).value)
+        self.default_mode = str(self.node.declare_parameter(
+            "flight_mode", config.astrobee()["default_flight_mode"]).value)
+        self.current_mode: str | None = None
+        self.ControlState = roszen.message_class("astrobee_msgs/msg/ControlState")
+        self.BezierCurve = roszen.message_class("astrobee_msgs/msg/BezierCurve")
+        self.QuatPoly = roszen.message_class("astrobee_msgs/msg/QuaternionPolynomial")
+        self.Point = roszen.message_class("geometry_msgs/msg/Point")
+        self.Path = roszen.message_class("nav_msgs/msg/Path")
+        self.PoseStamped = roszen.message_class("geometry_msgs/msg/PoseStamped")
+        self.GlobalResp = roszen.response_class("astrobee_msgs/srv/PlanGlobal")
+        self.LocalResp = roszen.response_class("astrobee_msgs/srv/PlanLocal")
+        latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
+        self.path_pub = self.node.create_publisher("nav_msgs/msg/Path", "/mob/planner/path", latched)
+        self.node.create_subscription("astrobee_msgs/msg/FlightMode", "/mob/flight_mode",
+                                      self._on_flight_mode, latched)
+        self.node.create_service("astrobee_msgs/srv/PlanGlobal", "/mob/planner/global", self._global)
+        self.node.create_service("astrobee_msgs/srv/PlanLocal", "/mob/planner/local", self._local)
+        planner.cached_safe_set(0.0)      # build the safe set before the first request
+        self.log.info(f"planner ready (sample rate {self.sample_rate} Hz, "
+                      f"default flight mode {self.default_mode})")
+
+    def _on_flight_mode(self, msg: Any) -> None:
+        if getattr(msg, "name", ""):
+            self.current_mode = str(msg.name)
+
+    def _rate(self, requested: float) -> float:
+        r = float(requested)
+        if not np.isfinite(r) or r < 0:
+            raise PlanError(INVALID_COMMAND, f"sample_rate must be >= 0 (got {requested})")
+        r = r if r > 0 else self.sample_rate
+        return min(r, 1000.0)
+
+    # ---- /mob/planner/global -----------------------------------------------------------
+    def _global(self, req: Any) -> Any:
+        resp = self.GlobalResp()
+        t0 = time.perf_counter()
+        try:
+            rate = self._rate(req.sample_rate)
+            p0, q0 = cv.pose_to_arrays(req.start)
+            p1, q1 = cv.pose_to_arrays(req.goal)
+            mode = req.flight_mode or self.current_mode or self.default_mode
+            plan = planner.plan_global(p0, q0, p1, q1, mode, bool(req.face_forward),
+                                       float(req.carry_extent))
+            traj = plan.trajectory
+            states = traj.sample_rate(rate)
+            resp.segment = cv.states_to_msgs(states, self.ControlState)
+            resp.position_spline = [cv.bezier_to_msg(p, self.BezierCurve, self.Point)
+                                    for p in traj.position]
+            resp.attitude_spline = [cv.quatpoly_to_msg(a, self.QuatPoly) for a in traj.attitude]
+            resp.duration = traj.duration
+            resp.success = True
+            resp.code = plan.code
+            resp.message = ("already there" if plan.code != SUCCESS else
+                            f"{len(plan.route)} boxes, {traj.duration:.1f} s")
+            self._publish_path(states)
+        except PlanError as exc:
+            resp.success, resp.code, resp.message = False, exc.code, str(exc)
+        except Exception as exc:  # a bug must not take the node down
+            self.log.error(f"global planner crashed: {exc}\n{traceback.format_exc()}")
+            resp.success, resp.code, resp.message = False, PLAN_FAILED, f"internal error: {exc}"
+        resp.planning_time = time.perf_counter() - t0
+        self.log.info(f"global plan: code {resp.code}, {resp.message} "
+                      f"({resp.planning_time:.3f} s)")
+        return resp
+
+    def _publish_path(self, states) -> None:
+        msg = self.Path()
+        msg.header.frame_id = "world"
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        poses = []
+        for i in range(len(states)):
+            ps = self.PoseStamped()
+            ps.header.frame_id = "world"
+            cv.set_time(ps.header.stamp, float(states.t[i]))
+            cv.set_pose(ps.pose, states.pos[i], states.quat[i])
+            poses.append(ps)
+        msg.poses = poses
+        self.path_pub.publish(msg)
+
+    # ---- /mob/planner/local ------------------------------------------------------------
+    def _local(self, req: Any) -> Any:
+        resp = self.LocalResp()
+        t0 = time.perf_counter()
+        try:
+            rate = self._rate(req.sample_rate)
+            start = cv.control_state_to_dict(req.start)
+            goal = cv.control_state_to_dict(req.goal)
+            try:
+                traj = local_planner.plan(start, goal, float(req.duration))
+            except ValueError as exc:
+                raise PlanError(INVALID_COMMAND, str(exc)) from exc
+            t_start = cv.time_of(req.start.when)
+            resp.segment = cv.states_to_msgs(traj.sample_rate(rate), self.ControlState, t_start)
+            resp.position = cv.bezier_to_msg(traj.position[0], self.BezierCurve, self.Point)
+            resp.attitude = cv.quatpoly_to_msg(traj.attitude[0], self.QuatPoly)
+            resp.success, resp.code, resp.message = True, SUCCESS, "ok"
+        except PlanError as exc:
+            resp.success, resp.code, resp.message = False, exc.code, str(exc)
+        except Exception as exc:
+            self.log.error(f"local planner crashed: {exc}\n{traceback.format_exc()}")
+            resp.success, resp.code, resp.message = False, PLAN_FAILED, f"internal error: {exc}"
+        resp.planning_time = time.perf_counter() - t0
+        return resp
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point (`ros2 run astrobee_planning planner_node`)."""
+    argv = sys.argv if argv is None else argv
+    node = PlannerNode(argv)
+    try:
+        node.node.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.node.destroy_node()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

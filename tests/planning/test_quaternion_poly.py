@@ -1,0 +1,63 @@
+import numpy as np
+import pytest
+
+from astrobee import rotations as rot
+from astrobee_planning.quaternion_poly import QuaternionPolynomial, quat_derivatives, reorientation
+
+
+def _random_case(seed):
+    rng = np.random.default_rng(seed)
+    q0, q1 = rot.normalize(rng.normal(size=4)), rot.normalize(rng.normal(size=4))
+    w0, a0, w1, a1 = (rng.normal(size=3) * 0.3 for _ in range(4))
+    return q0, w0, a0, q1, w1, a1
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_boundary_conditions_with_nonzero_rates(seed):
+    q0, w0, a0, q1, w1, a1 = _random_case(seed)
+    p = QuaternionPolynomial.from_boundary(q0, w0, a0, q1, w1, a1, 6.0, t0=3.0)
+    q, w, a = p.evaluate([3.0, 9.0])
+    assert abs(abs(q[0] @ q0) - 1) < 1e-12 and abs(abs(q[1] @ q1) - 1) < 1e-12
+    np.testing.assert_allclose(w, [w0, w1], atol=1e-10)
+    np.testing.assert_allclose(a, [a0, a1], atol=1e-10)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_rates_match_finite_differences(seed):
+    q0, w0, a0, q1, w1, a1 = _random_case(seed)
+    p = QuaternionPolynomial.from_boundary(q0, w0, a0, q1, w1, a1, 5.0)
+    h = 1e-5
+    for t in (0.0 + 2 * h, 1.3, 2.5, 4.9, 5.0 - 2 * h):
+        qm, qc, qp = (p.evaluate([t + d])[0][0] for d in (-h, 0.0, h))
+        qd = (qp - qm) / (2 * h)
+        qdd = (qp - 2 * qc + qm) / h**2
+        w_fd = 2 * rot.multiply(qd, rot.conjugate(qc))[:3]
+        _, w, a = p.evaluate([t])
+        np.testing.assert_allclose(w[0], w_fd, atol=1e-7)
+        # alpha from the second difference: vec(2 q'' q*) (q' q'* is scalar)
+        a_fd = 2 * rot.multiply(qdd, rot.conjugate(qc))[:3]
+        np.testing.assert_allclose(a[0], a_fd, atol=2e-4)
+    # the end values by one-sided differences of w
+    _, w_end, _ = p.evaluate([5.0 - 1e-4, 5.0])
+    assert np.allclose((w_end[1] - w_end[0]) / 1e-4, a1, atol=1e-3)
+
+
+def test_second_derivative_has_scalar_term():
+    """q_ddot = 0.5 [alpha,0] q - |w|^2/4 q: q . q_ddot = -|w|^2/4 (unit norm kept to 2nd order)."""
+    q0, w0, a0, *_ = _random_case(7)
+    qd, qdd = quat_derivatives(q0, w0, a0)
+    assert abs(q0 @ qd) < 1e-14
+    assert abs(q0 @ qdd + (w0 @ w0) / 4) < 1e-14
+    # d^2/dt^2 |q|^2 = 2 (|qd|^2 + q.qdd) = 0
+    assert abs(qd @ qd + q0 @ qdd) < 1e-14
+
+
+def test_reorientation_within_limits_and_reaches_goal():
+    q0 = rot.IDENTITY
+    q1 = rot.from_euler(0.3, -0.4, 2.5)
+    p = reorientation(q0, q1, 0.1745, 0.1745)
+    wm, am = p.peak_rates(1000)
+    assert wm <= 0.1745 and am <= 0.1745
+    q, w, a = p.evaluate([p.duration])
+    assert rot.angle_between(q[0], q1) < 1e-9
+    assert np.allclose(w, 0) and np.allclose(a, 0)
