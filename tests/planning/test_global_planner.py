@@ -1,0 +1,123 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from astrobee import flight_modes
+from astrobee import rotations as rot
+from astrobee_planning import bezier, planner
+from conftest import module_waypoints
+
+WPS = module_waypoints()
+PAIRS = list(itertools.combinations(sorted(WPS), 2))
+Q0 = rot.from_euler(0.0, 0.0, 0.3)
+Q1 = rot.from_euler(0.1, -0.2, 2.0)
+
+
+def _check_plan(plan, p0, q0, p1, q1, mode, safe):
+    tr, sp = plan.trajectory, plan.spline
+    # every control point inside its segment's box (so the curve is)
+    for s in range(len(sp.durations)):
+        b = sp.boxes[s]
+        assert np.all(sp.points[s] >= b[:3] - 1e-7) and np.all(sp.points[s] <= b[3:] + 1e-7)
+    # dense sampling: inside the safe set, within every limit
+    t = np.linspace(0.0, tr.duration, 4000)
+    st = tr.sample(t)
+    assert safe.contains_all(st.pos, tol=1e-7).all()
+    fm = flight_modes.get(mode)
+    assert np.linalg.norm(st.vel, axis=1).max() <= fm.hard_limit_vel * (1 + 1e-9)
+    assert np.linalg.norm(st.acc, axis=1).max() <= fm.hard_limit_accel * (1 + 1e-9)
+    assert np.linalg.norm(st.omega, axis=1).max() <= fm.hard_limit_omega * (1 + 1e-9)
+    assert np.linalg.norm(st.alpha, axis=1).max() <= fm.hard_limit_alpha * (1 + 1e-9)
+    # continuity of position..acceleration at the spline joints, attitude at its breaks
+    for k in range(3):
+        for s in range(len(sp.durations) - 1):
+            left = bezier.derivative_points(sp.points[s], sp.durations[s], k)[-1]
+            right = bezier.derivative_points(sp.points[s + 1], sp.durations[s + 1], k)[0]
+            assert np.allclose(left, right, atol=1e-7 * max(1.0, np.abs(left).max()))
+    eps = 1e-7
+    for piece in tr.attitude[1:]:
+        a, b = tr.sample([piece.t0 - eps, piece.t0 + eps])[[0]], tr.sample([piece.t0 + eps])
+        assert abs(abs(a.quat[0] @ b.quat[0]) - 1) < 1e-9
+        assert np.allclose(a.omega[0], b.omega[0], atol=1e-6)
+        assert np.allclose(a.alpha[0], b.alpha[0], atol=1e-5)
+    # start and end at the requested states, at rest
+    ends = tr.sample([0.0, tr.duration])
+    np.testing.assert_allclose(ends.pos, [p0, p1], atol=1e-7)
+    assert rot.angle_between(ends.quat[0], q0) < 1e-7 and rot.angle_between(ends.quat[1], q1) < 1e-7
+    for f in (ends.vel, ends.acc, ends.omega, ends.alpha):
+        assert np.abs(f).max() < 1e-7
+
+
+@pytest.mark.parametrize("a,b", PAIRS)
+def test_every_module_pair(a, b, safe):
+    plan = planner.plan_global(WPS[a], Q0, WPS[b], Q1, "nominal", safe=safe)
+    assert plan.code == planner.SUCCESS
+    _check_plan(plan, WPS[a], Q0, WPS[b], Q1, "nominal", safe)
+
+
+@pytest.mark.parametrize("a,b,mode", [("node_2", "jem", "nominal"), ("jem", "cupola", "nominal"),
+                                      ("us_lab", "eu_lab", "difficult"), ("node_1", "node_3", "quiet")])
+def test_face_forward(a, b, mode, safe):
+    plan = planner.plan_global(WPS[b], Q0, WPS[a], Q1, mode, face_forward=True, safe=safe)
+    _check_plan(plan, WPS[b], Q0, WPS[a], Q1, mode, safe)
+    # while translating fast, body x points along the velocity
+    st = plan.trajectory.sample(np.linspace(0, plan.trajectory.duration, 2000))
+    sp = np.linalg.norm(st.vel, axis=1)
+    fast = sp > 0.8 * sp.max()
+    bx = rot.rotate(st.quat[fast], np.array([1.0, 0, 0]))
+    cosang = np.sum(bx * st.vel[fast], axis=1) / sp[fast]
+    assert np.median(cosang) > 0.99 and cosang.min() > 0.9
+
+
+def test_pure_reorientation_and_already_there(safe):
+    p = WPS["node_2"]
+    plan = planner.plan_global(p, Q0, p, Q1, "nominal", safe=safe)
+    assert plan.code == planner.SUCCESS
+    st = plan.trajectory.sample(np.linspace(0, plan.trajectory.duration, 500))
+    assert np.allclose(st.pos, p)
+    assert rot.angle_between(st.quat[-1], Q1) < 1e-9
+    assert planner.plan_global(p, Q0, p, Q0, "nominal", safe=safe).code == planner.ALREADY_THERE
+
+
+@pytest.mark.parametrize("kwargs,code", [
+    (dict(goal_pos=[0.0, 0.0, 0.0]), planner.VIOLATES_KEEP_IN),
+    (dict(start_pos=[10.95, 9.0, 4.84]), planner.VIOLATES_KEEP_IN),
+    (dict(goal_pos=[np.nan, 0.0, 4.84]), planner.INVALID_COMMAND),
+    (dict(goal_quat=[0.0, 0.0, 0.0, 1.5]), planner.INVALID_COMMAND),
+    (dict(start_quat=[0.0, np.inf, 0.0, 1.0]), planner.INVALID_COMMAND),
+    (dict(flight_mode="warp"), planner.INVALID_FLIGHT_MODE),
+    (dict(flight_mode="off"), planner.INVALID_FLIGHT_MODE),
+    (dict(carry_extent=-1.0), planner.INVALID_COMMAND),
+])
+def test_bad_input_codes(kwargs, code):
+    args = dict(start_pos=WPS["node_2"], start_quat=Q0, goal_pos=WPS["jem"], goal_quat=Q1,
+                flight_mode="nominal")
+    args.update(kwargs)
+    with pytest.raises(planner.PlanError) as exc:
+        planner.plan_global(**args)
+    assert exc.value.code == code and str(exc.value)
+
+
+def test_tiny_quaternion_error_tolerated(safe):
+    q = Q0 * (1 + 2e-5)
+    plan = planner.plan_global(WPS["node_2"], q, WPS["jem"], Q1, "nominal", safe=safe)
+    assert plan.code == planner.SUCCESS
+
+
+def test_unreachable_goal_is_plan_failed():
+    """Two disconnected keep-in boxes: goal inside the safe set but not reachable."""
+    from astrobee_planning import boxes
+    iso = boxes.safe_set(keep_in=np.array([[0, 0, 0, 2, 2, 2], [5, 5, 5, 7, 7, 7]], float))
+    with pytest.raises(planner.PlanError) as exc:
+        planner.plan_global([1.0, 1, 1], Q0, [6.0, 6, 6], Q1, "nominal", safe=iso)
+    assert exc.value.code == planner.PLAN_FAILED
+
+
+def test_boundary_velocity():
+    """Given non-zero boundary velocities, the spline starts and ends with them."""
+    from astrobee_planning.global_planner import plan_position
+    v0, v1 = np.array([0.05, 0.0, 0.0]), np.array([0.0, -0.05, 0.0])
+    pp = plan_position(WPS["us_lab"], WPS["jem"], 0.2, 0.0175, v0=v0, v1=v1)
+    v = pp.spline.evaluate([0.0, pp.spline.duration], 1)
+    np.testing.assert_allclose(v, [v0, v1], atol=1e-7)
