@@ -18,4 +18,7 @@ for name, path in ROOTS.items():
     packages.append(name)
     packages += [f"{name}.{sub}" for sub in find_packages(path)]
 
-setup(packages=packages, package_dir=ROOTS)
+# The shipped interface definitions (.msg/.srv + package.xml) are data of roszen.
+package_data = {"roszen": ["interfaces/*/package.xml", "interfaces/*/msg/*.msg", "interfaces/*/srv/*.srv"]}
+
+setup(packages=packages, package_dir=ROOTS, package_data=package_data)
