@@ -233,3 +233,48 @@ def plot(series: Series, path: str | os.PathLike, boxes: np.ndarray, title: str 
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def finalize(run_dir: str | os.PathLike, bag_dir: str | os.PathLike) -> str:
+    """After the graph stopped: re-draw each leg's plot from the closed bag and note the bag's
+    figures in summary.json. Returns a one-line report."""
+    from astrobee import config
+
+    run_dir, bag_dir = Path(run_dir), Path(bag_dir)
+    path = run_dir / "summary.json"
+    if not path.exists():
+        return f"[summary] no {path}: the mission did not report"
+    data = json.loads(path.read_text())
+    if not bag_dir.exists():
+        data["bag"] = {"path": str(bag_dir), "error": "no bag recorded"}
+        write_json(path, data)
+        return f"[summary] {path} (no bag at {bag_dir})"
+    try:
+        series = read_bag(bag_dir)
+    except Exception as exc:  # noqa: BLE001 - an unreadable bag is reported, not fatal
+        data["bag"] = {"path": str(bag_dir), "error": str(exc)}
+        write_json(path, data)
+        return f"[summary] {path} (bag unreadable: {exc})"
+    legs = data.get("legs", [])
+    boxes = config.keep_in_boxes()
+    for leg in legs:
+        t0, t1 = leg.get("sim_t0"), leg.get("sim_t1")
+        if t0 is None:
+            continue
+        part = series.window(t0, t1 if t1 is not None else float("inf"))
+        if not part.position:
+            continue
+        name = "plot.png" if len(legs) == 1 else f"plot_{leg['scenario']}.png"
+        plot(part, run_dir / name, boxes, title=f"{leg['scenario']}: {leg.get('reason', '')} "
+             "(from the recorded bag)", start=(leg.get("start") or [None])[:3] or None,
+             goal=(leg.get("goal") or [None])[:3] or None)
+        leg["plot"] = name
+        leg["plot_source"] = "bag"
+        leg["bag_rms_position_error"] = part.tracking()["rms_position_error"]
+    data["bag"] = {"path": str(bag_dir), "pose_samples": len(series.pose_t),
+                   "command_samples": len(series.err_t), "contact_samples": len(series.clear_t)}
+    if len(legs) == 1:
+        data["plot"] = legs[0].get("plot", data.get("plot", ""))
+    write_json(path, data)
+    return (f"[summary] {path}: {'SUCCESS' if data.get('success') else 'FAILED'}; plots from "
+            f"{bag_dir} ({len(series.pose_t)} poses)")
