@@ -17,6 +17,7 @@ NODES: dict[tuple[str, str], str] = {
     ("astrobee_planning", "planner_node"): "astrobee_planning.planner_node:main",
     ("astrobee_control", "pd_controller_node"): "astrobee_control.pd_controller_node:main",
     ("astrobee_control", "mpc_controller_node"): "astrobee_control.mpc_controller_node:main",
+    ("astrobee", "mission"): "astrobee.mission:main",   # the mission client of a launch
 }
 
 USAGE = """usage: astrobee <command> [args]

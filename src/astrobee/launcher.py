@@ -373,10 +373,20 @@ def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: P
         run_dir = Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     ctx = LaunchContext(arguments=arguments, config_dir=find_config_dir(), run_dir=run_dir,
                         use_ros2=use_ros2, port=port)
-    specs = load_description(name)(ctx)
+    generate = load_description(name)
+    specs = generate(ctx)
     launcher = Launcher(specs, use_ros2=use_ros2, port=port, run_dir=run_dir, registry=registry,
                         sigint_timeout=sigint_timeout, sigterm_timeout=sigterm_timeout)
-    return launcher.run()
+    status = launcher.run()
+    # optional `post_run(ctx, status)` of the description: runs once every process has stopped
+    # (the bag is closed), e.g. the mission's plots read back from the recorded bag
+    post_run = getattr(sys.modules.get(generate.__module__), "post_run", None)
+    if post_run is not None:
+        try:
+            post_run(ctx, status)
+        except Exception as exc:  # noqa: BLE001 - a failed report must not hide the status
+            launcher.log(f"post-run step failed: {exc}")
+    return status
 
 
 __all__ = ["NodeSpec", "LaunchContext", "Launcher", "LaunchError", "launch", "ros2_available",

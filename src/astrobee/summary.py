@@ -266,8 +266,8 @@ def finalize(run_dir: str | os.PathLike, bag_dir: str | os.PathLike) -> str:
             continue
         name = "plot.png" if len(legs) == 1 else f"plot_{leg['scenario']}.png"
         plot(part, run_dir / name, boxes, title=f"{leg['scenario']}: {leg.get('reason', '')} "
-             "(from the recorded bag)", start=(leg.get("start") or [None])[:3] or None,
-             goal=(leg.get("goal") or [None])[:3] or None)
+             "(from the recorded bag)", start=leg["start"][:3] if leg.get("start") else None,
+             goal=leg["goal"][:3] if leg.get("goal") else None)
         leg["plot"] = name
         leg["plot_source"] = "bag"
         leg["bag_rms_position_error"] = part.tracking()["rms_position_error"]

@@ -1,7 +1,11 @@
 """The cargo-transport graph: router, simulator, planner, controller and the bag recorder.
 
 Launch arguments (`name:=value`): scenario (config/scenarios/<name>.yaml, default
-node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <run>/bag).
+node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <run>/bag),
+clock (realtime | fast | lockstep; default fast headless, realtime with gui), gui (true |
+false), mission (true | false: run the mission client, default true), demo (true: fly
+node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
+The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 """
 from __future__ import annotations
 
@@ -20,12 +24,21 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     ctl_name = f"{controller}_controller_node"
     ctl_params = write_params_file(ctx.run_dir / "params" / f"{ctl_name}.yaml", ctl_name,
                                    {**flatten_params(ctl_cfg), "scenario": scenario})
+    demo = ctx.flag("demo")
+    legs = ["node2_to_jem", "node2_to_jem_bag"] if demo else [scenario]
+    if demo:
+        scenario = legs[0]
+    gui = ctx.flag("gui")
+    clock = ctx.arg("clock", "realtime" if gui else "fast")
+    if clock not in ("realtime", "fast", "lockstep"):
+        raise LaunchError(f"clock must be realtime, fast or lockstep, got '{clock}'")
     common = {"scenario": scenario, "use_sim_time": True}
     port = ctx.port
     nodes = [
         NodeSpec("router", kind="router", command=["router", "--port", str(port)],
                  ros2_command=["ros2", "run", "rmw_zenoh_cpp", "rmw_zenohd"]),
-        NodeSpec("sim_node", "astrobee_sim", "sim_node", parameters=[common]),
+        NodeSpec("sim_node", "astrobee_sim", "sim_node",
+                 parameters=[{**common, "clock_mode": clock, "gui": gui}]),
         NodeSpec("planner_node", "astrobee_planning", "planner_node", parameters=[common]),
         NodeSpec(ctl_name, "astrobee_control", ctl_name,
                  parameters=[ctl_params, {"use_sim_time": True}]),
@@ -36,4 +49,18 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
                               command=["bag", "record", "-a", "-o", bag_dir],
                               ros2_command=["ros2", "bag", "record", "-a", "-s", "mcap",
                                             "-o", bag_dir]))
+    if ctx.flag("mission", True):
+        import sys
+        args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
+        nodes.append(NodeSpec("mission", "astrobee", "mission", kind="client",
+                              command=["run", "astrobee", "mission", *args],
+                              ros2_command=[sys.executable, "-m", "astrobee.mission", *args]))
     return nodes
+
+
+def post_run(ctx: LaunchContext, status: int) -> None:
+    """Once the graph has stopped: plots and bag figures of the run read back from its bag."""
+    from astrobee.summary import finalize
+    bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
+    if ctx.flag("record", True) and ctx.flag("mission", True):
+        print(finalize(ctx.run_dir, bag_dir), flush=True)
