@@ -218,9 +218,13 @@ class AxisQP:
         else:
             self.solver.update(P=px, A=ax, b=b)
         res = self.solver.solve()
-        if str(res.status) not in ("Solved", "AlmostSolved"):
+        status = str(res.status)
+        if "Infeasible" in status or res.x is None or len(res.x) != self.nx:
             return None
+        # other statuses (e.g. InsufficientProgress) are kept when the point passes the check
         x = np.asarray(res.x).reshape(self.S, self.N)
+        if not np.all(np.isfinite(x)):
+            return None
         return x if self.check(x, T, bc, vlim, alim) else None
 
     def check(self, x: np.ndarray, T: np.ndarray, bc: np.ndarray, vlim: np.ndarray,
