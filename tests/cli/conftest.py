@@ -125,9 +125,21 @@ def port():
 
 def graph_env(port: int) -> dict:
     """Environment that makes every roszen process use the router on `port`."""
-    env = dict(os.environ)
-    env["ZENOH_CONFIG_OVERRIDE"] = f'connect/endpoints=["tcp/127.0.0.1:{port}"]'
-    env["PYTHONUNBUFFERED"] = "1"
-    env.pop("ZENOH_SESSION_CONFIG_URI", None)
+    from roszen.testing import zenoh_env
+    env = zenoh_env(port)
     env.pop("RMW_IMPLEMENTATION", None)
+    env.pop("AMENT_PREFIX_PATH", None)
     return env
+
+
+@pytest.fixture
+def router():
+    """A roszen router on a free port (killed at the end); yields the port."""
+    from roszen import testing
+    with testing.router() as port:
+        yield port
+
+
+@pytest.fixture
+def env(router):
+    return graph_env(router)

@@ -78,7 +78,37 @@ def make_node(prefix: str = "_roszen_cli"):
     except Exception as exc:   # zenoh cannot open the session (router unreachable, bad config)
         raise CliError(f"cannot join the ROS graph: {exc}") from None
     node.context.graph.wait_ready(3.0)
+    prime_graph(node)
     return node
+
+
+def prime_graph(node, quiet: float = 0.1, limit: float = 1.0) -> None:
+    """Fill the node's graph cache with the tokens that existed before it joined.
+
+    A liveliness `get` sent right after the session opens can miss tokens the router has not
+    yet propagated; a liveliness subscriber with history receives all of them. Returns once
+    no token arrived for `quiet` seconds (bounded by `limit`).
+    """
+    import time
+
+    import zenoh
+    graph = node.context.graph
+    last = [time.monotonic()]
+
+    def on_sample(sample) -> None:
+        last[0] = time.monotonic()
+        key = str(sample.key_expr)
+        if sample.kind == zenoh.SampleKind.DELETE:
+            graph.remove(key)
+        else:
+            graph.add(key)
+
+    node._cli_graph_sub = node.context.session.liveliness().declare_subscriber(
+        f"@ros2_lv/{node.context.domain_id}/**",
+        zenoh.handlers.Callback(on_sample, indirect=False), history=True)
+    start = time.monotonic()
+    while time.monotonic() - start < limit and time.monotonic() - last[0] < quiet:
+        time.sleep(0.01)
 
 
 def fq_name(name: str) -> str:

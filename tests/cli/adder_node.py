@@ -1,0 +1,46 @@
+"""A tiny node of ours for the CLI tests: serves /add_two_ints (example_interfaces/AddTwoInts)
+and /trigger (std_srvs/Trigger), publishes /adder/count (std_msgs/Int32) at 10 Hz and a
+latched /adder/mode (std_msgs/String)."""
+import sys
+
+from roszen import LATCHED, Node, message_class
+
+
+def main() -> int:
+    node = Node("adder", argv=sys.argv)
+    calls = [0]
+
+    def add(req, resp):
+        resp.sum = req.a + req.b
+        calls[0] += 1
+        return resp
+
+    def trigger(req, resp):
+        resp.success = True
+        resp.message = f"triggered after {calls[0]} additions"
+        return resp
+
+    node.create_service("example_interfaces/srv/AddTwoInts", "/add_two_ints", add)
+    node.create_service("std_srvs/srv/Trigger", "/trigger", trigger)
+    Int32, String = message_class("std_msgs/msg/Int32"), message_class("std_msgs/msg/String")
+    count_pub = node.create_publisher("std_msgs/msg/Int32", "/adder/count", 10)
+    mode = node.create_publisher("std_msgs/msg/String", "/adder/mode", LATCHED)
+    mode.publish(String(data="adding"))
+    n = [0]
+
+    def tick():
+        n[0] += 1
+        count_pub.publish(Int32(data=n[0]))
+
+    node.create_timer(0.1, tick)
+    print("adder ready", flush=True)
+    try:
+        node.spin()
+    except KeyboardInterrupt:
+        pass
+    node.destroy_node()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
