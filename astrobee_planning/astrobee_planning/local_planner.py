@@ -59,6 +59,44 @@ def quaternion_coefficients(q0, w0, al0, q1, w1, al1, duration) -> np.ndarray:
     return np.einsum("ij,...jk->...ik", _HT, f)
 
 
+def _pure_times(v, q):
+    """[v, 0] (x) q for a 3-vector v and quaternion q (Python floats)."""
+    vx, vy, vz = v
+    qx, qy, qz, qw = q
+    return (qw * vx + vy * qz - vz * qy, qw * vy + vz * qx - vx * qz,
+            qw * vz + vx * qy - vy * qx, -(vx * qx + vy * qy + vz * qz))
+
+
+def plan_single(p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1, duration: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """One plan with Python-float arithmetic (the fast path of `plan`): (points (6,3), coeffs (6,4))."""
+    T = float(duration)
+    k1, k2 = T / 5.0, T * T / 20.0
+    p0, v0, a0, p1, v1, a1 = (tuple(map(float, x)) for x in (p0, v0, a0, p1, v1, a1))
+    pts = np.array([p0,
+                    [p0[i] + v0[i] * k1 for i in range(3)],
+                    [p0[i] + 2 * v0[i] * k1 + a0[i] * k2 for i in range(3)],
+                    [p1[i] - 2 * v1[i] * k1 + a1[i] * k2 for i in range(3)],
+                    [p1[i] - v1[i] * k1 for i in range(3)],
+                    p1])
+    q0 = tuple(map(float, q0))
+    q1 = tuple(map(float, q1))
+    n0 = sum(x * x for x in q0) ** 0.5
+    n1 = sum(x * x for x in q1) ** 0.5
+    sgn = 1.0 if sum(a * b for a, b in zip(q0, q1)) >= 0 else -1.0
+    q0 = tuple(x / n0 for x in q0)
+    q1 = tuple(sgn * x / n1 for x in q1)
+    rows = []
+    for q, w, al in ((q0, w0, al0), (q1, w1, al1)):
+        w = tuple(map(float, w))
+        d = _pure_times(w, q)
+        e = _pure_times(tuple(map(float, al)), q)
+        ww = 0.25 * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        rows += [q, tuple(0.5 * T * x for x in d),
+                 tuple(T * T * (0.5 * e[i] - ww * q[i]) for i in range(4))]
+    return pts, _HT @ np.array(rows)
+
+
 def plan(start, goal, duration: float, t0: float = 0.0) -> Trajectory:
     """One-piece trajectory between two full states (dicts or State-like objects with pos, vel,
     acc, quat, omega, alpha; world-frame rates) over `duration` seconds."""
@@ -67,15 +105,13 @@ def plan(start, goal, duration: float, t0: float = 0.0) -> Trajectory:
     g = lambda s, k: np.asarray(s[k] if isinstance(s, dict) else getattr(s, k), dtype=float)  # noqa: E731
     vals = [g(start, k) for k in ("pos", "vel", "acc", "quat", "omega", "alpha")] + \
            [g(goal, k) for k in ("pos", "vel", "acc", "quat", "omega", "alpha")]
-    for v in vals:
-        if not np.all(np.isfinite(v)):
-            raise ValueError("states must be finite")
+    if not np.all(np.isfinite(np.concatenate(vals))):
+        raise ValueError("states must be finite")
     for q in (vals[3], vals[9]):
         if abs(np.linalg.norm(q) - 1.0) > 1e-3:
             raise ValueError("quaternions must have unit norm")
     p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1 = vals
-    pts = control_points(p0, v0, a0, p1, v1, a1, duration)
-    coef = quaternion_coefficients(q0, w0, al0, q1, w1, al1, duration)
+    pts, coef = plan_single(p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1, duration)
     return Trajectory([BezierPiece(pts, float(t0), float(duration))],
                       [QuaternionPolynomial(coef, float(t0), float(duration))])
 
