@@ -1,0 +1,223 @@
+"""The whole graph, each node its own process, started by `astrobee launch cargo_transport`:
+a flight to the goal with a recorded bag, the controller killed mid-flight, Ctrl-C."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import selectors
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+pytestmark = [pytest.mark.graph, pytest.mark.slow]
+ROOT = Path(__file__).resolve().parents[2]
+
+pytest.importorskip("astrobee_sim.sim_node")
+pytest.importorskip("astrobee_planning.planner_node")
+
+# A short hop inside Node 2 (1.5 m): the fault tests need a flight, not the whole trip.
+SHORT_HOP = {
+    "description": "short hop in Node 2 (tests)",
+    "flight_mode": "nominal",
+    "robots": [{"name": "", "position": [10.95, 0.6, 4.84],
+                "orientation": [0.0, 0.0, -0.7071067811865476, 0.7071067811865476]}],
+    "bag": None,
+    "goal": {"position": [10.95, -0.9, 4.84],
+             "orientation": [0.0, 0.0, -0.7071067811865476, 0.7071067811865476]},
+}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def config_dir(tmp_path):
+    """The project's config with the test scenario added (ASTROBEE_CONFIG_DIR)."""
+    d = tmp_path / "config"
+    shutil.copytree(ROOT / "config", d)
+    (d / "scenarios" / "short_hop.yaml").write_text(yaml.safe_dump(SHORT_HOP))
+    return d
+
+
+class Launch:
+    """`astrobee launch cargo_transport` in its own process group; lines collected as read."""
+
+    def __init__(self, run_dir: Path, config_dir: Path, *args: str) -> None:
+        env = dict(os.environ, ASTROBEE_CONFIG_DIR=str(config_dir), PYTHONUNBUFFERED="1")
+        env.pop("ZENOH_CONFIG_OVERRIDE", None)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "astrobee.cli", "launch", "cargo_transport",
+             "--port", str(free_port()), "--run-dir", str(run_dir), *args],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            env=env, start_new_session=True, text=True)
+        self.lines: list[str] = []
+        self.sel = selectors.DefaultSelector()
+        self.sel.register(self.proc.stdout, selectors.EVENT_READ)
+
+    def read_until(self, pattern: str, timeout: float) -> re.Match:
+        rx = re.compile(pattern)
+        for line in self.lines:
+            m = rx.search(line)
+            if m:
+                return m
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if not self.sel.select(0.2):
+                continue
+            line = self.proc.stdout.readline()
+            if not line:
+                break
+            for part in line.rstrip("\n").split("\r"):
+                self.lines.append(part)
+                m = rx.search(part)
+                if m:
+                    return m
+        raise AssertionError(f"{pattern!r} not seen; last lines:\n" + "\n".join(self.lines[-40:]))
+
+    def wait(self, timeout: float) -> int:
+        end = time.monotonic() + timeout
+        while self.proc.poll() is None and time.monotonic() < end:
+            if self.sel.select(0.2):
+                line = self.proc.stdout.readline()
+                if line:
+                    self.lines.extend(line.rstrip("\n").split("\r"))
+        if self.proc.poll() is None:
+            raise AssertionError("launch did not exit; last lines:\n" + "\n".join(self.lines[-40:]))
+        rest = self.proc.stdout.read()
+        self.lines.extend(rest.splitlines())
+        return self.proc.returncode
+
+    def child_pids(self) -> dict[str, int]:
+        out = {}
+        for line in self.lines:
+            m = re.search(r"started '([^']+)' pid (\d+)", line)
+            if m:
+                out[m.group(1)] = int(m.group(2))
+        return out
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.proc.wait()
+        for pid in self.child_pids().values():
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+
+
+@pytest.fixture
+def launches():
+    started: list[Launch] = []
+    yield started
+    for launch in started:
+        launch.kill()
+
+
+def mcap_messages(bag_dir: Path) -> dict[str, list]:
+    """Every message of the bag decoded by an independent reader (mcap-ros2-support)."""
+    from mcap_ros2.reader import read_ros2_messages
+    files = sorted(bag_dir.glob("*.mcap"))
+    assert files, f"no MCAP file in {bag_dir}"
+    out: dict[str, list] = {}
+    for f in files:
+        for m in read_ros2_messages(str(f)):
+            out.setdefault(m.channel.topic, []).append(m.ros_msg)
+    return out
+
+
+def test_flight_reaches_goal_and_bag_decodes(tmp_path, config_dir, launches):
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=node2_to_jem")
+    launches.append(launch)
+    code = launch.wait(timeout=240.0)
+    summary = json.loads((run / "summary.json").read_text())
+    assert code == 0, "\n".join(launch.lines[-40:])
+    assert summary["success"], summary["reason"]
+    assert summary["final_position_error"] <= 0.2
+    assert summary["final_attitude_error"] <= 0.35
+    assert summary["contacts"] == 0
+    assert (run / "plot.png").stat().st_size > 10_000
+    msgs = mcap_messages(run / "bag")
+    poses = msgs["/loc/truth/pose"]
+    assert len(poses) > 100
+    last = poses[-1].pose.position
+    goal = np.array([10.93, -6.0, 4.85])
+    assert np.linalg.norm(np.array([last.x, last.y, last.z]) - goal) <= 0.2
+    assert "/gnc/ctl/command" in msgs and "/mob/state" in msgs and "/gnc/ctl/segment" in msgs
+    for pid in launch.child_pids().values():
+        assert not pid_alive(pid)
+
+
+def test_controller_killed_midflight(tmp_path, config_dir, launches):
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=short_hop")
+    launches.append(launch)
+    launch.read_until(r"CONTROLLING t=\s*[3-9]", timeout=120.0)
+    pids = launch.child_pids()
+    os.killpg(pids["pd_controller_node"], signal.SIGKILL)
+    code = launch.wait(timeout=60.0)
+    assert code != 0
+    assert any("pd_controller_node" in line and "exited" in line for line in launch.lines)
+    assert any("failed" in line and "pd_controller_node" in line for line in launch.lines)
+    for pid in pids.values():
+        assert not pid_alive(pid)
+    summary = json.loads((run / "summary.json").read_text())
+    assert not summary["success"]
+    # the sim's watchdog: a fault raised and the robot not accelerating after the last command
+    msgs = mcap_messages(run / "bag")
+    faults = [m for topic, ms in msgs.items() if "fault" in topic for m in ms]
+    assert any(f.active for f in faults), list(msgs)
+    cmds = msgs["/gnc/ctl/command"]
+    t_last = cmds[-1].header.stamp.sec + 1e-9 * cmds[-1].header.stamp.nanosec
+    twists = [(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec,
+               np.linalg.norm([m.twist.linear.x, m.twist.linear.y, m.twist.linear.z]))
+              for m in msgs["/loc/truth/twist"]]
+    after = [v for t, v in twists if t > t_last + 0.5]
+    at_kill = max(v for t, v in twists if t <= t_last)
+    assert after, "the sim did not run on after the controller died"
+    assert max(after) <= at_kill + 0.01  # no thrust: speed does not grow
+
+
+def test_sigint_leaves_nothing_behind(tmp_path, config_dir, launches):
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=short_hop")
+    launches.append(launch)
+    launch.read_until(r"CONTROLLING t=", timeout=120.0)
+    pids = launch.child_pids()
+    assert {"sim_node", "planner_node", "pd_controller_node", "recorder", "mission"} <= set(pids)
+    os.kill(launch.proc.pid, signal.SIGINT)
+    launch.wait(timeout=60.0)
+    for name, pid in pids.items():
+        assert not pid_alive(pid), f"{name} left behind"
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["status"] == "interrupted"
+    msgs = mcap_messages(run / "bag")
+    assert len(msgs["/loc/truth/pose"]) > 10
