@@ -231,6 +231,11 @@ class MissionClient:
             if not resp.success:
                 raise MissionError(f"/sim/reset to {name} failed: {resp.message}")
             self.pose = None
+            # let the controller see the jump and hold the new pose before a segment comes
+            n_changes, n_poses = len(self.mob_changes), len(self.series.pose_t)
+            self.spin_until(lambda: len(self.mob_changes) > n_changes
+                            or len(self.series.pose_t) > n_poses + 60, ready_timeout,
+                            "the controller to take the reset")
         progress.update(f"[mission] {name}: waiting for the robot's state and the controller")
         self.spin_until(lambda: self.pose is not None
                         and float(np.linalg.norm(self.pose[0] - start_p)) < 0.5
