@@ -405,6 +405,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                 break
             legs.append(res)
             all_series.append(client.series)
+            client.series = sm.Series()  # samples after this leg's end belong to no leg
             progress.done(f"[mission] {name}: {'SUCCESS' if res.success else 'FAILED'}: {res.reason}"
                           + (f" ({res.duration:.1f} s sim, {res.real_time_factor:.1f}x real time)"
                              if res.duration is not None and res.real_time_factor else ""))
