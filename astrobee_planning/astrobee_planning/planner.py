@@ -86,8 +86,11 @@ def _hold(p: np.ndarray, t0: float, duration: float) -> BezierPiece:
 
 def plan_global(start_pos, start_quat, goal_pos, goal_quat, flight_mode: str | None = None,
                 face_forward: bool = False, carry_extent: float = 0.0,
-                safe: SafeSet | None = None) -> GlobalPlan:
-    """Plan from a start pose to a goal pose at rest; raises PlanError with a Motion code."""
+                safe: SafeSet | None = None, limit_scale: float = 1.0,
+                angular_scale: float = 1.0) -> GlobalPlan:
+    """Plan from a start pose to a goal pose at rest; raises PlanError with a Motion code.
+    limit_scale (0, 1] plans against a fraction of the mode's limits (e.g. for a formation);
+    angular_scale (0, 1] lowers the angular limits further."""
     t_start = time.perf_counter()
     p0, p1 = validate_point(start_pos, "start"), validate_point(goal_pos, "goal")
     q0, q1 = validate_quat(start_quat, "start"), validate_quat(goal_quat, "goal")
@@ -105,7 +108,10 @@ def plan_global(start_pos, start_quat, goal_pos, goal_quat, flight_mode: str | N
             raise PlanError(VIOLATES_KEEP_IN, f"{name} {np.round(p, 3).tolist()} is outside the "
                                               f"keep-in set shrunk by the robot"
                                               + (f" and a {carry_extent} m load" if carry_extent else ""))
-    wmax, amax = mode.hard_limit_omega, mode.hard_limit_alpha
+    if not (0 < limit_scale <= 1 and 0 < angular_scale <= 1):
+        raise PlanError(INVALID_COMMAND, "limit_scale and angular_scale must be in (0, 1]")
+    wmax = mode.hard_limit_omega * limit_scale * angular_scale
+    amax = mode.hard_limit_alpha * limit_scale * angular_scale
     if np.linalg.norm(p1 - p0) < POS_EPS:
         if rot.angle_between(q0, q1) < ATT_EPS:
             traj = Trajectory([_hold(p0, 0.0, 1e-3)], [reorientation(q0, q1, wmax, amax, 0.0, 1e-3)])
@@ -114,7 +120,8 @@ def plan_global(start_pos, start_quat, goal_pos, goal_quat, flight_mode: str | N
         traj = Trajectory([_hold(p0, 0.0, rp.duration)], [rp])
         return GlobalPlan(traj, None, [], time.perf_counter() - t_start)
     try:
-        pp = plan_position(p0, p1, mode.hard_limit_vel, mode.hard_limit_accel, safe)
+        pp = plan_position(p0, p1, mode.hard_limit_vel * limit_scale,
+                           mode.hard_limit_accel * limit_scale, safe)
     except OutsideSafeSet as exc:
         raise PlanError(VIOLATES_KEEP_IN, str(exc)) from exc
     except NoRoute as exc:
