@@ -1,6 +1,6 @@
 """A stand-in simulator for graph tests of the mission/controller/planner chain without pybullet:
 a numpy rigid body in lockstep with the controller (publishes a state, waits for the command of
-that stamp, steps), with /clock, /loc/truth/pose|twist, /gnc/ekf, /sim/contacts and /sim/fault.
+that stamp, steps), with /clock, /loc/truth/pose|twist, /gnc/ekf, /sim/contacts and /sim/fault, and /sim/reset (teleport to a scenario's start).
 
     python tests/e2e/fake_sim.py --position X Y Z --yaw RAD
 """
@@ -39,6 +39,22 @@ def main() -> int:
     node.create_subscription("astrobee_msgs/msg/FamCommand", "/gnc/ctl/command",
                              lambda m: cmds.__setitem__((m.header.stamp.sec, m.header.stamp.nanosec), m), 50)
     t, wrench, last_cmd_t, fault = 0.0, np.zeros(6), 0.0, False
+    Reset = roszen.response_class("astrobee_msgs/srv/Reset")
+
+    def on_reset(req):
+        nonlocal body
+        from astrobee import config
+        resp = Reset()
+        try:
+            r = config.scenario(req.scenario)["robots"][0]
+        except config.ConfigError as exc:
+            resp.success, resp.message = False, str(exc)
+            return resp
+        body = RigidBody(mp.robot(), r["position"], r["orientation"])
+        resp.success, resp.message = True, f"reset to {req.scenario}"
+        return resp
+
+    node.create_service("astrobee_msgs/srv/Reset", "/sim/reset", on_reset)
     try:
         while True:
             s = body.state()
