@@ -144,3 +144,20 @@ def test_stop_service_holds_pose(graph):
     assert sim.states[-1][0] == 2  # STOPPED
     assert abs(body.state().position[0] - x_stop) < 0.1
     assert body.state().position[0] < 1.5
+
+
+def test_bad_segment_rejected_node_keeps_holding(graph):
+    p0 = np.array([1.0, 2.0, 3.0])
+    body = RigidBody(mp.robot(), p0, rot.IDENTITY)
+    sim = FakeSim(graph, body)
+    sim.tick(timeout=20.0)
+    seg = segment_msg(rest_to_rest(p0, p0 + 1.0, rot.IDENTITY, rot.IDENTITY, 5.0))
+    seg.segment[3].pose.position.x = float("nan")
+    sim.seg_pub.publish(seg)
+    for _ in range(int(3.0 / DT)):
+        sim.tick()
+    graph.spin_once(timeout_sec=0.1)
+    assert any("rejected" in e for _, e in sim.states), sim.states
+    assert 9 not in [s for s, _ in sim.states]  # never CONTROLLING
+    assert sim.states[-1][0] == 2  # still holding (STOPPED)
+    assert np.linalg.norm(body.state().position - p0) < 1e-3
