@@ -45,6 +45,8 @@ def _launch(argv: list[str]) -> int:
                    help="start nodes with `ros2 run` (default: when ros2 + rmw_zenoh found)")
     p.add_argument("--no-ros2", dest="ros2", action="store_false")
     p.add_argument("--demo", action="store_true", help="shorthand for demo:=true")
+    p.add_argument("--gui", action="store_true", help="shorthand for gui:=true (pybullet window)")
+    p.add_argument("--scenario", help="shorthand for scenario:=NAME")
     p.add_argument("--list", action="store_true", help="list launch descriptions")
     p.add_argument("--sigint-timeout", type=float, default=5.0,
                    help="seconds a child gets to exit after SIGINT before SIGTERM (default 5)")
@@ -62,6 +64,10 @@ def _launch(argv: list[str]) -> int:
         arguments[key] = value
     if a.demo:
         arguments.setdefault("demo", "true")
+    if a.gui:
+        arguments.setdefault("gui", "true")
+    if a.scenario:
+        arguments.setdefault("scenario", a.scenario)
     from pathlib import Path
     try:
         return launcher.launch(a.name, arguments, port=a.port, use_ros2=a.ros2,
