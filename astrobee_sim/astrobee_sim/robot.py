@@ -4,7 +4,8 @@ Mass model: the 9.58 kg of FACTS.md is the whole platform, arm included; the bod
 rest (9.58 - 0.69 kg) and its inertia is chosen so the whole robot with the arm stowed has the
 FACTS inertia about its centre of mass (diagonal part; the arm's products of inertia, ~1e-4 kg m^2,
 are left out). The body's collision shape is one box covering body + propulsion modules (the
-0.32 m envelope): pybullet's soft-body collision needs convex shapes.
+0.32 m envelope): pybullet's soft-body collision needs convex shapes. The arm links collide
+too (so a gripper cannot drag an anchored bag handle into a wall); the fingers do not.
 """
 from __future__ import annotations
 
@@ -66,19 +67,19 @@ def urdf(body_mass: float, body_com, body_inertia) -> str:
     # Deployed (0 rad) the arm points along the mount frame's +x (the body's -x: out of the aft).
     s += ('<link name="arm_proximal">'
           + _inertial(A["proximal"], (PROXIMAL_LEN / 2, 0, 0), _box_inertia(A["proximal"], (PROXIMAL_LEN, .03, .03)))
-          + _box((PROXIMAL_LEN, 0.03, 0.03), (PROXIMAL_LEN / 2, 0, 0), [0.3, 0.3, 0.3, 1], False) + '</link>')
+          + _box((PROXIMAL_LEN, 0.03, 0.03), (PROXIMAL_LEN / 2, 0, 0), [0.3, 0.3, 0.3, 1]) + '</link>')
     s += (f'<joint name="arm_proximal_joint" type="revolute"><parent link="body"/><child link="arm_proximal"/>'
           f'<origin xyz="{m[0]} {m[1]} {m[2]}" rpy="{r[0]} {r[1]} {r[2]}"/><axis xyz="0 1 0"/>'
           f'<limit lower="{pl[0]}" upper="{pl[1]}" effort="2.0" velocity="{v}"/></joint>')
     s += ('<link name="arm_distal">'
           + _inertial(A["distal"], (DISTAL_LEN / 2, 0, 0), _box_inertia(A["distal"], (DISTAL_LEN, .03, .03)))
-          + _box((DISTAL_LEN, 0.03, 0.03), (DISTAL_LEN / 2, 0, 0), [0.4, 0.4, 0.4, 1], False) + '</link>')
+          + _box((DISTAL_LEN, 0.03, 0.03), (DISTAL_LEN / 2, 0, 0), [0.4, 0.4, 0.4, 1]) + '</link>')
     s += (f'<joint name="arm_distal_joint" type="revolute"><parent link="arm_proximal"/><child link="arm_distal"/>'
           f'<origin xyz="{PROXIMAL_LEN} 0 0"/><axis xyz="0 0 1"/>'
           f'<limit lower="{dl[0]}" upper="{dl[1]}" effort="2.0" velocity="{v}"/></joint>')
     s += ('<link name="gripper">'
           + _inertial(A["gripper"], (GRIPPER_LEN / 2, 0, 0), _box_inertia(A["gripper"], (GRIPPER_LEN, .04, .02)))
-          + _box((GRIPPER_LEN * 0.6, 0.04, 0.02), (GRIPPER_LEN * 0.3, 0, 0), [0.2, 0.2, 0.2, 1], False) + '</link>')
+          + _box((GRIPPER_LEN * 0.6, 0.04, 0.02), (GRIPPER_LEN * 0.3, 0, 0), [0.2, 0.2, 0.2, 1]) + '</link>')
     s += (f'<joint name="gripper_mount" type="fixed"><parent link="arm_distal"/><child link="gripper"/>'
           f'<origin xyz="{DISTAL_LEN} 0 0"/></joint>')
     gmax = float(arm["gripper_open"]) / 2

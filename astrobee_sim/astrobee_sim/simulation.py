@@ -52,7 +52,7 @@ class Simulation:
                  physics_rate: float = 350.0, gui: bool = False, drag: bool = False,
                  bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, robots: list[str] | None = None,
-                 flight_mode: str | None = None, wall_thickness: float = 0.25):
+                 flight_mode: str | None = None, wall_thickness: float = 0.25, wall_bodies: int = 64):
         import pybullet as p
         self.p = p
         self.client = p.connect(p.GUI if gui else p.DIRECT)
@@ -60,6 +60,7 @@ class Simulation:
         self.dt = 1.0 / float(physics_rate)
         self.drag = drag
         self.world = station(wall_thickness)
+        self.wall_bodies = wall_bodies
         self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
                           "bag_resolution": bag_resolution, "robots": robots,
                           "flight_mode": flight_mode}
@@ -126,7 +127,10 @@ class Simulation:
         p.setTimeStep(self.dt, physicsClientId=c)
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=c)
-        self.wall_ids = build_pybullet(self.world, c, visuals=self.gui)
+        # soft bodies collide properly only with plain convex shapes: compound walls let FEM
+        # nodes sink through (measured); the rigid models get the cheaper compounds
+        self.wall_ids = build_pybullet(self.world, c, visuals=self.gui,
+                                       per_body=1 if fem else self.wall_bodies)
         rng = np.random.default_rng(seed)
         noise = float(sc.get("initial_position_noise", 0.0))
         self.robots = {}

@@ -134,6 +134,17 @@ def build_pybullet(world: World, client: int, visuals: bool = False,
     w = world.walls
     half = ((w[:, 3:] - w[:, :3]) / 2).tolist()
     pos = ((w[:, 3:] + w[:, :3]) / 2).tolist()
+    if per_body <= 1:      # one plain (non-compound) static box per slab
+        for k in range(len(w)):
+            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half[k], physicsClientId=client)
+            vis = -1
+            if visuals:
+                vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half[k], physicsClientId=client,
+                                          rgbaColor=[*module_colour(owner[k]), 0.35])
+            ids.append(p.createMultiBody(baseMass=0, baseCollisionShapeIndex=col,
+                                         baseVisualShapeIndex=vis, basePosition=pos[k],
+                                         useMaximalCoordinates=True, physicsClientId=client))
+        return ids
     for k in range(0, len(w), per_body):
         sl = slice(k, k + per_body)
         n = len(half[sl])

@@ -1,0 +1,54 @@
+"""The procedural ISS: walls enclose exactly the grown keep-in boxes, hatches open, distance query."""
+import numpy as np
+
+from astrobee import config
+from astrobee_sim.world import World, subtract_box
+
+
+def test_subtract_box_volume():
+    a = np.array([0, 0, 0, 2, 2, 2.0])
+    b = np.array([1, 1, 1, 3, 3, 3.0])
+    pieces = subtract_box(a, b)
+    vol = sum(np.prod(p[3:] - p[:3]) for p in pieces)
+    assert np.isclose(vol, 8 - 1)
+
+
+def test_walls_enclose_free_space_without_overlap():
+    w = World.from_config(thickness=0.05)
+    rng = np.random.default_rng(0)
+    # points just outside each face of each free box: either free (a hatch) or inside a wall
+    pts = []
+    for b in w.free:
+        for _ in range(150):
+            ax, side = rng.integers(3), rng.integers(2)
+            p = rng.uniform(b[:3], b[3:])
+            p[ax] = b[3 + ax] + 0.01 if side else b[ax] - 0.01
+            pts.append(p)
+    P = np.array(pts)
+    free = w.in_free_space(P)
+    in_wall = np.zeros(len(P), bool)
+    for s in w.walls:
+        in_wall |= np.all((P >= s[:3]) & (P <= s[3:]), axis=1)
+    assert np.all(free | in_wall), "a gap in the walls"
+    assert not np.any(free & in_wall), "a wall inside the free space"
+    assert np.all(w.wall_distance(P[in_wall & ~free]) < 0)
+
+
+def test_hatch_passages_are_open():
+    w = World.from_config()
+    for a, b in (("node_2", "jem"), ("node_2", "eu_lab"), ("node_1", "node_3")):
+        pa, pb = config.waypoint(a), config.waypoint(b)
+        # straight segment between the two module waypoints lies in free space for these pairs
+        seg = pa + np.linspace(0, 1, 200)[:, None] * (pb - pa)
+        assert w.in_free_space(seg).all(), (a, b)
+        assert (w.wall_distance(seg) > 0).all()
+
+
+def test_wall_distance_matches_box_geometry():
+    w = World.from_config()
+    c = config.waypoint("jem")
+    box = w.free[6]                     # the JEM's main box
+    assert np.all(c > box[:3]) and np.all(c < box[3:])
+    expect = min(np.min(c - box[:3]), np.min(box[3:] - c))
+    assert abs(w.wall_distance(c)[0] - expect) < 1e-9
+    assert not w.in_free_space([[0.0, 50.0, 0.0]])[0]
