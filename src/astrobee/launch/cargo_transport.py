@@ -2,7 +2,8 @@
 
 Launch arguments (`name:=value`): scenario (config/scenarios/<name>.yaml, default
 node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <run>/bag),
-clock (realtime | fast | lockstep; default fast headless, realtime with gui), gui (true |
+clock (realtime | fast | lockstep; default lockstep headless: the sim waits for each
+command, as fast as the graph answers; realtime with gui), gui (true |
 false), mission (true | false: run the mission client, default true), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
@@ -29,7 +30,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     if demo:
         scenario = legs[0]
     gui = ctx.flag("gui")
-    clock = ctx.arg("clock", "realtime" if gui else "fast")
+    clock = ctx.arg("clock", "realtime" if gui else "lockstep")
     if clock not in ("realtime", "fast", "lockstep"):
         raise LaunchError(f"clock must be realtime, fast or lockstep, got '{clock}'")
     common = {"scenario": scenario, "use_sim_time": True}
