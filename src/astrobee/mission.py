@@ -150,6 +150,7 @@ class MissionClient:
                                              latched)
         self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", "/mob/planner/global")
         self.reset_cli = node.create_client("astrobee_msgs/srv/Reset", "/sim/reset")
+        self.control_cli = node.create_client("astrobee_msgs/srv/SimControl", "/sim/control")
 
     # ---- callbacks ----------------------------------------------------------------------
     def _on_pose(self, msg: Any) -> None:
@@ -225,9 +226,18 @@ class MissionClient:
         start_p = np.asarray(robot["position"], float)
 
         if reset:
+            # pause first so that no command of the previous leg (stamped with its late sim
+            # times) is still in flight when the clock restarts, then reset and resume
+            ctl = self.roszen.request_class("astrobee_msgs/srv/SimControl")
+            pause, resume = ctl(), ctl()
+            pause.command, resume.command = 0, 1
+            self.call(self.control_cli, pause, ready_timeout, "/sim/control (pause)")
+            end = time.monotonic() + 0.3
+            self.spin_until(lambda: time.monotonic() > end, 5.0, "in-flight commands")
             req = self.roszen.request_class("astrobee_msgs/srv/Reset")()
             req.scenario, req.seed = name, 0
             resp = self.call(self.reset_cli, req, ready_timeout, "/sim/reset")
+            self.call(self.control_cli, resume, ready_timeout, "/sim/control (resume)")
             if not resp.success:
                 raise MissionError(f"/sim/reset to {name} failed: {resp.message}")
             self.pose = None
@@ -269,6 +279,7 @@ class MissionClient:
         seg.segment = list(plan.segment)
         n_changes = len(self.mob_changes)
         self.series = sm.Series()  # this leg's figures (the subscriptions feed self.series)
+        self.faults = []  # faults during this leg's flight only
         t_sent = self.sim_time
         res.sim_t0 = t_sent
         wall_sent = time.monotonic()
