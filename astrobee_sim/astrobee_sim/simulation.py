@@ -212,16 +212,28 @@ class Simulation:
         return None if self.bag is None else self.bag.state()
 
     def contacts(self) -> list[Contact]:
-        """Contacts of the robots and the bag with the station walls."""
+        """Contacts of the robots and the bag with the station walls.
+
+        Rigid bodies: pybullet's contact points. FEM nodes are not reported by pybullet: a node
+        within 1 cm of a wall counts, one contact (the deepest node) per tick.
+        """
         p, c = self.p, self.client
+        walls = set(self.wall_ids)
         named = [(n or "robot", r.id) for n, r in self.robots.items()]
-        if self.bag is not None:
+        fem = self.bag is not None and self.bag.model == "fem"
+        if self.bag is not None and not fem:
             named += [("bag", b) for b in self.bag.body_ids]
         out = []
         for name, body in named:
-            for w in self.wall_ids:
-                for cp in p.getContactPoints(bodyA=body, bodyB=w, physicsClientId=c):
-                    out.append(Contact(name, "iss", np.array(cp[6]), np.array(cp[7]), float(cp[9])))
+            for cp in p.getContactPoints(bodyA=body, physicsClientId=c):
+                if cp[2] in walls:
+                    out.append(Contact(name, "iss", np.array(cp[5]), np.array(cp[7]), float(cp[9])))
+        if fem:
+            x = self.bag.points()
+            d = self.world.wall_distance(x)
+            i = int(d.argmin())
+            if d[i] < 0.01:
+                out.append(Contact("bag", "iss", x[i].copy(), np.zeros(3), 0.0))
         return out
 
     def clearance(self) -> tuple[float, float]:
