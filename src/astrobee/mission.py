@@ -68,6 +68,8 @@ class LegResult:
     real_time_factor: float | None = None
     sim_t0: float | None = None
     sim_t1: float | None = None
+    wall_t0: float | None = None            # wall clock (s since the epoch) of the flight,
+    wall_t1: float | None = None            # to find the leg in the bag (sim time restarts)
     plot: str = ""
 
 
@@ -206,9 +208,12 @@ class MissionClient:
             res.success, res.reason = False, str(exc)
         except Interrupted:
             res.success, res.reason = False, "interrupted (SIGINT/SIGTERM)"
+            self.interrupted_result = res
             raise
         finally:
             res.wall_time = time.monotonic() - wall0
+            if res.wall_t0 is not None and res.wall_t1 is None:
+                res.wall_t1 = time.time()
             self._finish(res)
         return res
 
@@ -283,6 +288,7 @@ class MissionClient:
         t_sent = self.sim_time
         res.sim_t0 = t_sent
         wall_sent = time.monotonic()
+        res.wall_t0 = time.time()
         self.seg_pub.publish(seg)
 
         def controlling_seen() -> bool:
@@ -311,6 +317,7 @@ class MissionClient:
         t_end = next(t for t, s, _ in self.mob_changes[n_changes:] if s in (STOPPED, IDLE)
                      and any(s2 == CONTROLLING for _, s2, _ in self.mob_changes[n_changes:]))
         res.sim_t1 = self.sim_time
+        res.wall_t1 = time.time()
         t_acc = next(t for t, s, _ in self.mob_changes[n_changes:] if s == CONTROLLING)
         res.duration = t_end - t_acc
         wall = time.monotonic() - wall_sent
@@ -410,7 +417,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                 res = client.fly(name, reset=i > 0, progress=progress, wall_timeout=wall_timeout,
                                  ready_timeout=ready_timeout)
             except Interrupted:
-                legs.append(client_last(client, name))
+                legs.append(getattr(client, "interrupted_result", None) or client_last(client, name))
                 all_series.append(client.series)
                 status, code = "interrupted", 130
                 break

@@ -115,8 +115,11 @@ class Series:
                 "contact_samples": int(sum(self.in_contact))}
 
 
-def read_bag(bag_dir: str | os.PathLike, namespace: str = "") -> Series:
-    """The flight's series read back from a recorded rosbag2 (MCAP) directory."""
+def read_bag(bag_dir: str | os.PathLike, namespace: str = "",
+             log_window: tuple[float, float] | None = None) -> Series:
+    """The flight's series read back from a recorded rosbag2 (MCAP) directory; with
+    `log_window` (wall-clock s) only the messages recorded in it (one leg of a multi-leg run,
+    whose sim clock restarts at each reset)."""
     from roszen import typestore
     from roszen.bag.reader import BagReader
 
@@ -125,7 +128,10 @@ def read_bag(bag_dir: str | os.PathLike, namespace: str = "") -> Series:
                 ns + CONTACTS: "add_contacts", ns + BAG_STATE: "add_bag"}
     series = Series()
     reader = BagReader(bag_dir)
+    lo, hi = (log_window[0] * 1e9, log_window[1] * 1e9) if log_window else (-1.0, float("inf"))
     for m in reader.messages(list(handlers)):
+        if not lo <= m.log_time_ns <= hi:
+            continue
         try:
             msg = typestore.deserialize(m.data, m.topic.type)
             getattr(series, handlers[m.topic.name])(msg)
@@ -251,18 +257,17 @@ def finalize(run_dir: str | os.PathLike, bag_dir: str | os.PathLike) -> str:
         return f"[summary] {path} (no bag at {bag_dir})"
     try:
         series = read_bag(bag_dir)
+        legs = data.get("legs", [])
+        parts = [read_bag(bag_dir, log_window=(leg["wall_t0"], leg["wall_t1"]))
+                 if leg.get("wall_t0") is not None and leg.get("wall_t1") is not None
+                 else None for leg in legs]
     except Exception as exc:  # noqa: BLE001 - an unreadable bag is reported, not fatal
         data["bag"] = {"path": str(bag_dir), "error": str(exc)}
         write_json(path, data)
         return f"[summary] {path} (bag unreadable: {exc})"
-    legs = data.get("legs", [])
     boxes = config.keep_in_boxes()
-    for leg in legs:
-        t0, t1 = leg.get("sim_t0"), leg.get("sim_t1")
-        if t0 is None:
-            continue
-        part = series.window(t0, t1 if t1 is not None else float("inf"))
-        if not part.position:
+    for leg, part in zip(legs, parts):
+        if part is None or not part.position:
             continue
         name = "plot.png" if len(legs) == 1 else f"plot_{leg['scenario']}.png"
         plot(part, run_dir / name, boxes, title=f"{leg['scenario']}: {leg.get('reason', '')} "
