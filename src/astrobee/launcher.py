@@ -243,7 +243,11 @@ class Launcher:
     def _env(self, spec: NodeSpec) -> dict[str, str]:
         env = dict(os.environ)
         env["PYTHONUNBUFFERED"] = "1"
-        if not self.use_ros2 and "ZENOH_CONFIG_OVERRIDE" not in spec.env:
+        if spec.kind == "router":
+            # the session override (connect/listen endpoints) is not for the router: its
+            # listen endpoint comes from --port
+            env.pop("ZENOH_CONFIG_OVERRIDE", None)
+        elif not self.use_ros2 and "ZENOH_CONFIG_OVERRIDE" not in spec.env:
             env.setdefault("ZENOH_CONFIG_OVERRIDE",
                            f'connect/endpoints=["tcp/127.0.0.1:{self.port}"]')
         env.update(spec.env)

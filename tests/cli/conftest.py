@@ -48,6 +48,7 @@ class Proc:
                                       stdin=subprocess.DEVNULL, env=env, cwd=cwd,
                                       start_new_session=True)
         self.lines: list[str] = []
+        self.times: list[float] = []       # time.monotonic() at which each stdout line arrived
         self.err: list[str] = []
         self._cv = threading.Condition()
         self._t = [threading.Thread(target=self._read, args=(self.popen.stdout, self.lines),
@@ -59,7 +60,10 @@ class Proc:
 
     def _read(self, stream, sink):
         for raw in iter(stream.readline, b""):
+            now = time.monotonic()
             with self._cv:
+                if sink is self.lines:
+                    self.times.append(now)
                 sink.append(raw.decode("utf-8", "replace").rstrip("\n"))
                 self._cv.notify_all()
         with self._cv:

@@ -118,7 +118,10 @@ def test_cargo_transport_lists_the_graph(tmp_path):
     ctx = LaunchContext({"scenario": "node2_to_jem"}, find_config_dir(), tmp_path, False, 7447)
     specs = cargo_transport.generate_nodes(ctx)
     names = [s.name for s in specs]
-    assert names == ["router", "sim_node", "planner_node", "pd_controller_node", "recorder"]
+    assert names[:5] == ["router", "sim_node", "planner_node", "pd_controller_node", "recorder"]
+    assert LaunchContext({"record": "false"}, find_config_dir(), tmp_path, False, 7447) and \
+        "recorder" not in [s.name for s in cargo_transport.generate_nodes(
+            LaunchContext({"record": "false"}, find_config_dir(), tmp_path, False, 7447))]
     launcher = Launcher(specs, astrobee_cmd=["astrobee"])
     argv = launcher.argv_for(specs[3])
     assert argv[:4] == ["astrobee", "run", "astrobee_control", "pd_controller_node"]

@@ -35,7 +35,19 @@ def _router_args(r: argparse.ArgumentParser) -> None:
 
 def _router(args) -> int:
     from roszen import router
+    import os
+
+    from roszen.zconfig import ConfigError, parse_override
     listen = args.listen or (f"tcp/127.0.0.1:{args.port}" if args.port else None)
+    if listen and os.environ.get("ZENOH_CONFIG_OVERRIDE"):
+        # an explicit --port/--listen wins over a session override's endpoints
+        try:
+            items = parse_override(os.environ["ZENOH_CONFIG_OVERRIDE"])
+        except ConfigError as exc:
+            raise CliError(str(exc)) from None
+        os.environ["ZENOH_CONFIG_OVERRIDE"] = ";".join(
+            f"{k}={v}" for k, v in items if k.strip("/") not in ("listen/endpoints",
+                                                                 "connect/endpoints"))
     return router.main(["--listen", listen] if listen else [])
 
 
@@ -45,19 +57,19 @@ def main(argv: list[str] | None = None, prog: str = "roszen", registry=None) -> 
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] == "run":
         return _run(argv[1:], prog, registry)
-    if argv and argv[0] == "router":    # no verb modules needed: starts fast
-        r = argparse.ArgumentParser(prog=f"{prog} router",
-                                    description="run the Zenoh router (rmw_zenohd equivalent)")
-        _router_args(r)
-        args = r.parse_args(argv[1:])
-        return int(args.func(args) or 0)
     try:
-        parser = build_parser(prog)
-        args = parser.parse_args(argv)
+        if argv and argv[0] == "router":    # no verb modules needed: starts fast
+            parser = argparse.ArgumentParser(
+                prog=f"{prog} router", description="run the Zenoh router (rmw_zenohd equivalent)")
+            _router_args(parser)
+            args = parser.parse_args(argv[1:])
+        else:
+            parser = build_parser(prog)
+            args = parser.parse_args(argv)
         return int(args.func(args) or 0)
     except CliError as exc:
         verb = " ".join(a for a in argv[:2] if not a.startswith("-"))
-        print(f"{prog} {verb}: {exc}".replace("  ", " "), file=sys.stderr)
+        print(f"{prog} {verb}: {exc}" if verb else f"{prog}: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 0
