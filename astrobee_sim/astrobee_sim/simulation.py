@@ -187,7 +187,7 @@ class Simulation:
                 if self.time - self.last_command[name] > self.watchdog_timeout + 1e-9:
                     if not self.fault[name]:
                         self.fault[name] = True
-                    r.wrench_cmd = np.zeros(6)
+                        r.wrench_cmd = np.zeros(6)
                 elif self.fault[name]:
                     self.fault[name] = False
                 r.apply()
@@ -230,9 +230,8 @@ class Simulation:
                     out.append(Contact(name, "iss", np.array(cp[5]), np.array(cp[7]), float(cp[9])))
         if fem:
             x = self.bag.points()
-            d = self.world.wall_distance(x)
-            i = int(d.argmin())
-            if d[i] < 0.01:
+            d, i = self.world.nearest(x)
+            if d < 0.01:
                 out.append(Contact("bag", "iss", x[i].copy(), np.zeros(3), 0.0))
         return out
 
@@ -240,7 +239,7 @@ class Simulation:
         """Smallest distance of the robots' envelope and of the bag to a wall (m)."""
         half = float(config.astrobee().get("envelope", 0.32)) / 2
         pts = np.array([r.pose()[0] for r in self.robots.values()])
-        rc = float(self.world.wall_distance(pts).min()) - half if len(pts) else -1.0
+        rc = self.world.clearance(pts) - half if len(pts) else -1.0
         bc = self.world.clearance(self.bag.points()) if self.bag is not None else -1.0
         return rc, bc
 

@@ -93,20 +93,74 @@ class World:
                         (p[:, None, :] <= self.free[None, :, 3:]), axis=2)
         return inside.any(axis=1)
 
-    def wall_distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance (m) from each point to the nearest wall slab (negative inside a wall)."""
-        p = np.atleast_2d(np.asarray(points, dtype=float))
-        lo, hi = self.walls[None, :, :3], self.walls[None, :, 3:]
+    @staticmethod
+    def _box_sdf(p: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """(P, B) signed distance from points to boxes (negative inside)."""
+        lo, hi = boxes[None, :, :3], boxes[None, :, 3:]
         q = p[:, None, :]
-        d_out = np.maximum(np.maximum(lo - q, q - hi), 0.0)
-        outside = np.linalg.norm(d_out, axis=2)
-        inside = np.minimum(q - lo, hi - q).min(axis=2)     # >0 when the point is inside the slab
-        sd = np.where(outside > 0, outside, -np.maximum(inside, 0.0))
-        return sd.min(axis=1)
+        outside = np.linalg.norm(np.maximum(np.maximum(lo - q, q - hi), 0.0), axis=2)
+        inside = np.minimum(q - lo, hi - q).min(axis=2)     # >0 when the point is inside the box
+        return np.where(outside > 0, outside, -np.maximum(inside, 0.0))
+
+    def _candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Slabs that can be nearest to some point of the box [lo, hi]: those whose distance to
+        the box is at most the largest distance from the box to the slab nearest its centre."""
+        gap = np.maximum(np.maximum(self.walls[:, :3] - hi, lo - self.walls[:, 3:]), 0.0)
+        lb = np.linalg.norm(gap, axis=1)
+        c = 0.5 * (lo + hi)
+        d_c = self._box_sdf(c[None], self.walls)[0]
+        k = int(d_c.argmin())
+        ub = max(d_c[k], 0.0) + float(np.linalg.norm(hi - lo)) / 2
+        return self.walls[lb <= ub + 1e-12]
+
+    def wall_distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (m) from each point to the nearest wall slab (negative inside a wall).
+
+        Exact. The slabs that can matter for a region (the points' bounding box grown by 0.5 m)
+        are cached and reused while the points stay inside it, so a query per tick is cheap.
+        """
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        caches = self.__dict__.setdefault("_caches", [])
+        for cache in caches:
+            if np.all(lo >= cache[0]) and np.all(hi <= cache[1]):
+                break
+        else:
+            blo, bhi = lo - 0.5, hi + 0.5
+            cache = (blo, bhi, self._candidates(blo, bhi))
+            caches.insert(0, cache)
+            del caches[4:]          # a few regions: robots and bag queried alternately
+        cand = cache[2]
+        if len(cand) > 4 and len(p) > 1:
+            # prune again with the points' own box: only slabs that can beat the nearest one
+            gap = np.maximum(np.maximum(cand[:, :3] - hi, lo - cand[:, 3:]), 0.0)
+            lb = np.linalg.norm(gap, axis=1)
+            first = self._box_sdf(p, cand[[int(lb.argmin())]])[:, 0]
+            cand = cand[lb <= max(first.max(), 0.0) + 1e-12]
+        return self._box_sdf(p, cand).min(axis=1)
+
+    def nearest(self, points: np.ndarray) -> tuple[float, int]:
+        """Smallest signed wall distance over a point set and the index of the point: slabs are
+        visited nearest-bound first and the search stops once no slab can do better."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        gap = np.maximum(np.maximum(self.walls[:, :3] - hi, lo - self.walls[:, 3:]), 0.0)
+        lb = np.linalg.norm(gap, axis=1)
+        order = np.argsort(lb, kind="stable")
+        best, arg = np.inf, 0
+        for start in range(0, len(order), 4):
+            idx = order[start:start + 4]
+            if lb[idx[0]] > max(best, 0.0):
+                break
+            d = self._box_sdf(p, self.walls[idx]).min(axis=1)
+            i = int(d.argmin())
+            if d[i] < best:
+                best, arg = float(d[i]), i
+        return best, arg
 
     def clearance(self, points: np.ndarray) -> float:
         """Smallest signed wall distance over a set of points (e.g. a bag's nodes)."""
-        return float(self.wall_distance(points).min())
+        return self.nearest(points)[0]
 
 
 MODULE_COLOURS = {

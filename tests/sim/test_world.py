@@ -52,3 +52,15 @@ def test_wall_distance_matches_box_geometry():
     expect = min(np.min(c - box[:3]), np.min(box[3:] - c))
     assert abs(w.wall_distance(c)[0] - expect) < 1e-9
     assert not w.in_free_space([[0.0, 50.0, 0.0]])[0]
+
+
+def test_pruned_queries_match_brute_force():
+    w = World.from_config(thickness=0.25)
+    rng = np.random.default_rng(3)
+    lo, hi = w.free[:, :3].min(axis=0), w.free[:, 3:].max(axis=0)
+    for _ in range(200):
+        pts = rng.uniform(lo, hi) + rng.normal(0, rng.uniform(0.01, 1.0), (40, 3))
+        brute = w._box_sdf(pts, w.walls).min(axis=1)
+        assert np.allclose(w.wall_distance(pts), brute)
+        d, i = w.nearest(pts)
+        assert np.isclose(d, brute.min()) and np.isclose(brute[i], d)
