@@ -176,3 +176,30 @@ def test_recorder_killed_bag_is_recoverable(procs, router, tmp_path):
         data = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()
                 if c.topic == "/fast"]
     assert len(data) >= 40 and set(data) == {"x"}
+
+
+def test_play_loop_and_start_offset(procs, router, tmp_path):
+    from roszen import typestore
+    from roszen.bag.writer import BagWriter
+    bag = tmp_path / "bag"
+    w = BagWriter(bag)
+    w.add_topic("/n", "std_msgs/msg/Int32", typestore.message_definition("std_msgs/msg/Int32"),
+                typestore.type_hash("std_msgs/msg/Int32"))
+    Int32 = typestore.message_class("std_msgs/msg/Int32")
+    for i in range(10):
+        w.write("/n", typestore.serialize(Int32(data=i), "std_msgs/msg/Int32"),
+                1_700_000_000_000_000_000 + i * 50_000_000)
+    w.close()
+    env = graph_env(router)
+    echo = procs([ASTROBEE, "topic", "echo", "/n", "std_msgs/msg/Int32", "--field", "data"],
+                 env=env)
+    time.sleep(1.0)
+    play = procs([ASTROBEE, "bag", "play", str(bag), "--loop", "--start-offset", "0.2"],
+                 env=env)
+    deadline = time.monotonic() + 20
+    while len([x for x in echo.lines if x != "---"]) < 13 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    play.signal(signal.SIGINT)
+    assert play.wait(timeout=20) == 0
+    got = [int(x) for x in echo.lines if x != "---"]
+    assert got[:13] == [4, 5, 6, 7, 8, 9, 4, 5, 6, 7, 8, 9, 4]     # 0.2 s in, then again

@@ -144,3 +144,33 @@ def test_bad_input_one_line_error(graph, argv, needle):
     assert len(err) == 1, p.stderr
     assert needle in err[0]
     assert err[0].startswith("astrobee ")
+
+
+def test_hz_and_bw_report_the_publisher(graph, procs):
+    hz = procs([ASTROBEE, "topic", "hz", "/adder/count"], env=graph)
+    bw = procs([ASTROBEE, "topic", "bw", "/adder/count"], env=graph)
+    line = hz.wait_line(lambda x: x.startswith("average rate:") and float(x.split()[-1]) > 0,
+                        timeout=20)
+    assert 5.0 < float(line.split()[-1]) < 20.0          # the adder publishes at 10 Hz
+    assert hz.wait_line("window:")
+    bw.wait_line("Subscribed to [/adder/count]")
+    line = bw.wait_line(" from ", timeout=20)
+    assert "B/s from" in line
+    bw.wait_line("Message size mean: 8 B")              # Int32 CDR: 4-byte header + 4
+    for p in (hz, bw):
+        p.signal(signal.SIGINT)
+        assert p.wait() == 0
+
+
+def test_run_registry_node_joins_graph_and_stops_on_sigint(graph, procs):
+    node = procs([ASTROBEE, "run", "astrobee_planning", "planner_node", "--ros-args",
+                  "-r", "__node:=planner_probe"], env=graph)
+    deadline = __import__("time").monotonic() + 30
+    while __import__("time").monotonic() < deadline:
+        if "/planner_probe" in run(graph, "node", "list").stdout.split():
+            break
+        assert node.popen.poll() is None, node.err[-5:]
+    else:
+        raise AssertionError(f"planner_probe never joined: {node.err[-5:]}")
+    node.signal(signal.SIGINT)
+    assert node.wait(timeout=20) in (0, -signal.SIGINT, 130)
