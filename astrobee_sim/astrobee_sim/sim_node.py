@@ -21,8 +21,7 @@ from typing import Any
 import numpy as np
 
 from astrobee import config, flight_modes
-from astrobee import rotations as rot
-
+from .robot import qrot
 from .simulation import ScenarioError, Simulation
 
 FAULT_WATCHDOG = 1
@@ -250,7 +249,7 @@ class SimNode:
             ekf.child_frame_id = f"{name}/body" if name else "body"
             ekf.pose = ps.pose
             _vec(ekf.velocity, v)
-            _vec(ekf.omega, rot.rotate_inverse(q, w))
+            _vec(ekf.omega, qrot((-q[0], -q[1], -q[2], q[3]), w))      # world -> body
             ekf.confidence = 0
             io["ekf"].publish(ekf)
             ts = M["tfs"]()
@@ -382,8 +381,8 @@ class SimNode:
         next_pub = time.monotonic() + 0.5
 
         def waiting():
-            want = [n for n, io in self.robot_io.items()
-                    if io["cmd_stamp"] >= 0 or self.node.count_publishers(io["topic"]) > 0]
+            want = [n for n, io in self.robot_io.items() if n in self.sim.robots and
+                    (io["cmd_stamp"] >= 0 or self.node.count_publishers(io["topic"]) > 0)]
             if first and not want:
                 return ["(no controller yet)"]
             return [n or "/" for n in want if self.robot_io[n]["cmd_stamp"] < t]

@@ -113,26 +113,29 @@ class World:
         ub = max(d_c[k], 0.0) + float(np.linalg.norm(hi - lo)) / 2
         return self.walls[lb <= ub + 1e-12]
 
-    def wall_distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance (m) from each point to the nearest wall slab (negative inside a wall).
-
-        Exact. The slabs that can matter for a region (the points' bounding box grown by 0.5 m)
-        are cached and reused while the points stay inside it, so a query per tick is cheap.
-        """
-        p = np.atleast_2d(np.asarray(points, dtype=float))
-        lo, hi = p.min(axis=0), p.max(axis=0)
+    def _region(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Candidate slabs for points inside [lo, hi], cached per region (the box grown by
+        0.5 m, reused while queries stay inside it; a few regions kept for robots and bag)."""
         caches = self.__dict__.setdefault("_caches", [])
         for cache in caches:
             if np.all(lo >= cache[0]) and np.all(hi <= cache[1]):
-                break
-        else:
-            blo, bhi = lo - 0.5, hi + 0.5
-            cache = (blo, bhi, self._candidates(blo, bhi))
-            caches.insert(0, cache)
-            del caches[4:]          # a few regions: robots and bag queried alternately
-        cand = cache[2]
+                return cache[2]
+        blo, bhi = lo - 0.5, hi + 0.5
+        cache = (blo, bhi, self._candidates(blo, bhi))
+        caches.insert(0, cache)
+        del caches[4:]
+        return cache[2]
+
+    def wall_distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (m) from each point to the nearest wall slab (negative inside a wall).
+
+        Exact: only slabs that can be some point's nearest are evaluated (region cache, then
+        a bound from the points' own box).
+        """
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        cand = self._region(lo, hi)
         if len(cand) > 4 and len(p) > 1:
-            # prune again with the points' own box: only slabs that can beat the nearest one
             gap = np.maximum(np.maximum(cand[:, :3] - hi, lo - cand[:, 3:]), 0.0)
             lb = np.linalg.norm(gap, axis=1)
             first = self._box_sdf(p, cand[[int(lb.argmin())]])[:, 0]
@@ -144,7 +147,8 @@ class World:
         visited nearest-bound first and the search stops once no slab can do better."""
         p = np.atleast_2d(np.asarray(points, dtype=float))
         lo, hi = p.min(axis=0), p.max(axis=0)
-        gap = np.maximum(np.maximum(self.walls[:, :3] - hi, lo - self.walls[:, 3:]), 0.0)
+        walls = self._region(lo, hi)
+        gap = np.maximum(np.maximum(walls[:, :3] - hi, lo - walls[:, 3:]), 0.0)
         lb = np.linalg.norm(gap, axis=1)
         order = np.argsort(lb, kind="stable")
         best, arg = np.inf, 0
@@ -152,7 +156,7 @@ class World:
             idx = order[start:start + 4]
             if lb[idx[0]] > max(best, 0.0):
                 break
-            d = self._box_sdf(p, self.walls[idx]).min(axis=1)
+            d = self._box_sdf(p, walls[idx]).min(axis=1)
             i = int(d.argmin())
             if d[i] < best:
                 best, arg = float(d[i]), i

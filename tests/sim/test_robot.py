@@ -123,3 +123,19 @@ def test_mass_and_inertia_match_config(make_sim):
         _, q, _, _ = sim.robot_state()
         w_body = rot.rotate_inverse(q, w)
         assert abs(w_body[ax] - 0.02 / r.inertia[ax] * sim.time) < 0.03 * 0.02 / r.inertia[ax] * sim.time
+
+
+def test_optional_drag_slows_the_robot(make_sim):
+    speeds = {}
+    for drag in (False, True):
+        sim = make_sim("node2_to_jem", drag=drag)
+        r = sim.robots[""]
+        r.set_pose(*sim.robot_state()[:2], velocity=(0, -0.5, 0))
+        sim.step(350 * 2)                                  # no command: coasting
+        speeds[drag] = np.linalg.norm(sim.robot_state()[2])
+    assert abs(speeds[False] - 0.5) < 1e-6
+    # quadratic drag: dv/dt = -k v^2 / m  ->  v = v0 / (1 + k v0 t / m)
+    cfg = config.astrobee()
+    k = 0.5 * cfg["air_density"] * cfg["drag_coefficient"] * cfg["drag_area"]
+    expect = 0.5 / (1 + k * 0.5 * 2.0 / cfg["mass"])
+    assert abs(speeds[True] - expect) < 2e-3 and speeds[True] < 0.5

@@ -211,3 +211,26 @@ def test_bad_startup_exits_with_one_line(params, env, needle):
     assert r.returncode != 0
     assert any(needle in ln and ln.startswith("sim_node: error:") for ln in lines), r.stderr
     assert not any("Traceback" in ln for ln in lines)
+
+
+def test_two_robots_each_under_its_namespace(graph):
+    g = graph("scenario:=two_robots_bag", "bag_model:=constraint", "clock_mode:=fast")
+    got = {}
+    for topic, typ in (("/loc/truth/pose", "geometry_msgs/msg/PoseStamped"),
+                       ("/bumble/loc/truth/pose", "geometry_msgs/msg/PoseStamped"),
+                       ("/bumble/gnc/ekf", "astrobee_msgs/msg/EkfState"),
+                       ("/bumble/mob/flight_mode", "astrobee_msgs/msg/FlightMode"),
+                       ("/sim/bag/state", "astrobee_msgs/msg/BagState")):
+        qos = roszen.LATCHED if topic.endswith("flight_mode") else 10
+        g.node.create_subscription(typ, topic, lambda m, t=topic: got.setdefault(t, m), qos)
+    assert g.spin_until(lambda: len(got) == 5, 30.0), set(got)
+    a, b = got["/loc/truth/pose"].pose.position, got["/bumble/loc/truth/pose"].pose.position
+    assert abs(a.y - b.y) > 0.5                        # on either side of the bag
+    assert list(got["/sim/bag/state"].attached) == [True, True]
+    assert got["/bumble/gnc/ekf"].child_frame_id == "bumble/body"
+    r = g.call("astrobee_msgs/srv/SetFlightMode", "/bumble/mob/set_flight_mode", flight_mode="quiet")
+    assert r.success
+    modes = []
+    g.node.create_subscription("astrobee_msgs/msg/FlightMode", "/bumble/mob/flight_mode",
+                               modes.append, roszen.LATCHED)
+    assert g.spin_until(lambda: any(m.name == "quiet" for m in modes), 10.0)
