@@ -45,7 +45,7 @@ def add_parser(sub) -> None:
     echo.add_argument("--flow-style", action="store_true", help="YAML flow style")
     echo.add_argument("--csv", action="store_true", help="comma-separated values")
     echo.add_argument("--timeout", type=positive_float, default=None,
-                      help="exit with an error if no message arrives within this many seconds")
+                      help="stop after this many seconds (an error if no message arrived)")
     echo.add_argument("--discovery-timeout", type=positive_float, default=3.0,
                       help="seconds to wait for the topic to appear when no type is given")
     echo.set_defaults(func=echo_cmd)
