@@ -133,3 +133,32 @@ def test_cargo_transport_lists_the_graph(tmp_path):
     with pytest.raises(LaunchError, match="unknown scenario"):
         cargo_transport.generate_nodes(LaunchContext({"scenario": "nope"}, find_config_dir(),
                                                      tmp_path, False, 7447))
+
+
+def test_ros2_mode_uses_ros2_run_when_ros2_and_rmw_zenoh_are_present(procs, port, tmp_path):
+    """With `ros2` on PATH and RMW_IMPLEMENTATION=rmw_zenoh_cpp, nodes start via `ros2 run`
+    (here a stand-in `ros2` script that reports its arguments)."""
+    import os
+    import stat
+    fake = tmp_path / "bin" / "ros2"
+    fake.parent.mkdir()
+    fake.write_text(f"""#!/bin/sh
+echo "ros2 $*"
+if [ "$1 $2 $3" = "run rmw_zenoh_cpp rmw_zenohd" ]; then
+  exec {ASTROBEE} router --port {port}
+fi
+exec sleep 60
+""")
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    env = graph_env(port)
+    env["PATH"] = f"{fake.parent}{os.pathsep}{env['PATH']}"
+    env["RMW_IMPLEMENTATION"] = "rmw_zenoh_cpp"
+    p = procs([ASTROBEE, "launch", str(HERE / "launch_files" / "ros2_mode.py"), "--port",
+               str(port), "--run-dir", str(tmp_path / "run")], env=env)
+    p.wait_line("[router] ros2 run rmw_zenoh_cpp rmw_zenohd")
+    line = p.wait_line("[talker] ros2 run")
+    assert line.split("] ", 1)[1].strip() == \
+        "ros2 run demo_nodes_py talker --ros-args -p x:=1 -p flag:=true -r chatter:=/talk"
+    p.signal(signal.SIGINT)
+    assert p.wait(timeout=30) == 0
+    assert _all_dead(_pids(p).values()) is True
