@@ -22,7 +22,7 @@ import numpy as np
 
 from astrobee import config, flight_modes
 from .robot import qrot
-from .simulation import ScenarioError, Simulation
+from .simulation import ScenarioError, Simulation, sim_defaults
 
 FAULT_WATCHDOG = 1
 
@@ -54,7 +54,8 @@ class SimNode:
         self.roszen = roszen
         self.node = n = roszen.Node("sim_node", argv=argv)
         self.log = n.get_logger()
-        par = lambda name, default: n.declare_parameter(name, default).value  # noqa: E731
+        d = sim_defaults()
+        par = lambda name, default: n.declare_parameter(name, d.get(name, default)).value  # noqa: E731
         self.scenario = par("scenario", "node2_to_jem")
         bag_model = par("bag_model", "")
         bag_variant = par("bag_variant", "")

@@ -34,6 +34,11 @@ class Contact:
 _WORLD_CACHE: dict = {}
 
 
+def sim_defaults() -> dict:
+    """The `simulator:` section of config/astrobee.yaml (empty if absent)."""
+    return dict(config.astrobee().get("simulator") or {})
+
+
 def station(wall_thickness: float = 0.25) -> World:
     """The procedural ISS geometry (cached per thickness: it only depends on config/iss.yaml).
 
@@ -49,15 +54,18 @@ class Simulation:
     """World + robots + bag, stepped at `physics_rate` Hz."""
 
     def __init__(self, scenario: str | dict = "node2_to_jem", seed: int = 0,
-                 physics_rate: float = 350.0, gui: bool = False, drag: bool = False,
+                 physics_rate: float | None = None, gui: bool = False, drag: bool = False,
                  bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, robots: list[str] | None = None,
-                 flight_mode: str | None = None, wall_thickness: float = 0.25, wall_bodies: int = 64):
+                 flight_mode: str | None = None, wall_thickness: float | None = None,
+                 wall_bodies: int = 64):
         import pybullet as p
         self.p = p
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.gui = gui
-        self.dt = 1.0 / float(physics_rate)
+        defaults = sim_defaults()
+        self.dt = 1.0 / float(physics_rate or defaults.get("physics_rate", 350.0))
+        wall_thickness = float(wall_thickness or defaults.get("wall_thickness", 0.25))
         self.drag = drag
         self.world = station(wall_thickness)
         self.wall_bodies = wall_bodies
