@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from astrobee import rotations as rot
+from astrobee_sim.robot import qrot
 from astrobee_sim.simulation import Simulation
 
 CASES = [("fem", 400), ("fem", 1000), ("constraint", 0), ("composite", 0), ("rigid", 0)]
@@ -25,8 +26,11 @@ TARGET = {"fem": 3.0, "constraint": 50.0, "composite": 50.0, "rigid": 50.0}
 
 def pd_wrench(pos, q, v, w, goal, q_goal):
     """Body-frame wrench of a plain PD law (gains of the nominal flight mode, mass 20 kg)."""
-    f = rot.rotate_inverse(q, 20.0 * (0.6 * (goal - pos) - 1.2 * v))
-    t = 0.15 * (4.0 * rot.attitude_error(q, q_goal) - 3.2 * rot.rotate_inverse(q, w))
+    qi = (-q[0], -q[1], -q[2], q[3])
+    f = qrot(qi, 20.0 * (0.6 * (goal - pos) - 1.2 * v))
+    e = rot.multiply(qi, q_goal)                         # small-angle attitude error, body frame
+    e = 2.0 * e[:3] * (1.0 if e[3] >= 0 else -1.0)
+    t = 0.15 * (4.0 * e - 3.2 * qrot(qi, w))
     return np.r_[f, t]
 
 

