@@ -1,0 +1,144 @@
+"""Helpers for multi-process tests: free ports, a router subprocess, node processes cleaned up at exit."""
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from typing import Iterator, Mapping, Optional, Sequence
+
+_procs: list = []
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_port(port: int, timeout: float = 10.0, host: str = "127.0.0.1") -> bool:
+    """Poll until something accepts TCP connections on port (bounded)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            with socket.create_connection((host, port), timeout=0.2):
+                return True
+        except OSError:
+            time.sleep(0.05)
+    return False
+
+
+def zenoh_env(port: int, domain_id: Optional[int] = None, base: Optional[Mapping[str, str]] = None) -> dict:
+    """Environment for a node process talking to the router on 127.0.0.1:port."""
+    env = dict(os.environ if base is None else base)
+    env["ZENOH_CONFIG_OVERRIDE"] = (f'connect/endpoints=["tcp/127.0.0.1:{port}"];'
+                                    f'listen/endpoints=["tcp/127.0.0.1:0"]')
+    env.pop("ZENOH_SESSION_CONFIG_URI", None)
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(domain_id)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
+
+
+def spawn(cmd: Sequence[str], env: Optional[Mapping[str, str]] = None, **kw) -> subprocess.Popen:
+    """Start a process in its own process group; it is killed at interpreter exit if still alive."""
+    kw.setdefault("stdout", subprocess.PIPE)
+    kw.setdefault("stderr", subprocess.PIPE)
+    p = subprocess.Popen(list(cmd), env=dict(env) if env is not None else None, start_new_session=True,
+                         text=True, **kw)
+    _procs.append(p)
+    return p
+
+
+def python_cmd(*args: str) -> list:
+    """[sys.executable, *args] (the interpreter running the tests)."""
+    return [sys.executable, *args]
+
+
+def stop(p: subprocess.Popen, timeout: float = 3.0) -> Optional[int]:
+    """SIGTERM the process group, then SIGKILL after timeout; returns the exit code."""
+    if p.poll() is None:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(p.pid, signal.SIGTERM)
+        try:
+            p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(p.pid, signal.SIGKILL)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout)
+    for f in (p.stdout, p.stderr, p.stdin):
+        if f is not None:
+            with contextlib.suppress(Exception):
+                f.close()
+    if p in _procs:
+        _procs.remove(p)
+    return p.returncode
+
+
+def kill9(p: subprocess.Popen) -> None:
+    """SIGKILL the process group at once (a crash, as far as the graph can tell)."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(p.pid, signal.SIGKILL)
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        p.wait(5)
+
+
+def _cleanup() -> None:
+    for p in list(_procs):
+        stop(p, 1.0)
+
+
+atexit.register(_cleanup)
+
+
+@contextlib.contextmanager
+def router(port: Optional[int] = None, timeout: float = 10.0) -> Iterator[int]:
+    """Run `python -m roszen.router` on 127.0.0.1:port in a subprocess; yields the port."""
+    port = port or free_port()
+    env = dict(os.environ)
+    env.pop("ZENOH_ROUTER_CONFIG_URI", None)
+    env.pop("ZENOH_CONFIG_OVERRIDE", None)
+    p = spawn(python_cmd("-m", "roszen.router", "--listen", f"tcp/127.0.0.1:{port}"), env,
+              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        if not wait_port(port, timeout):
+            stop(p)
+            err = p.stderr.read() if p.stderr and not p.stderr.closed else ""
+            raise RuntimeError(f"router on port {port} did not start: {err.strip()}")
+        yield port
+    finally:
+        stop(p)
+
+
+def read_until(p: subprocess.Popen, needle: str, timeout: float = 10.0, stream: str = "stdout") -> list:
+    """Read lines from p's stdout (or stderr) until one contains needle; returns the lines read.
+
+    Raises TimeoutError (with the lines seen) when the bounded wait passes or the process exits.
+    """
+    import selectors
+    f = getattr(p, stream)
+    sel = selectors.DefaultSelector()
+    sel.register(f, selectors.EVENT_READ)
+    lines: list = []
+    end = time.monotonic() + timeout
+    try:
+        while True:
+            rem = end - time.monotonic()
+            if rem <= 0:
+                raise TimeoutError(f"{needle!r} not seen in {timeout} s; got {lines[-20:]}")
+            if not sel.select(rem):
+                continue
+            line = f.readline()
+            if not line:
+                raise TimeoutError(f"process exited ({p.poll()}) before {needle!r}; got {lines[-20:]}")
+            lines.append(line.rstrip("\n"))
+            if needle in line:
+                return lines
+    finally:
+        sel.unregister(f)

@@ -1,0 +1,31 @@
+"""Shared fixtures: a router subprocess on a free port and the env for node processes."""
+from __future__ import annotations
+
+
+import pytest
+
+
+
+@pytest.fixture(scope="session")
+def router_port():
+    """One router process for the whole test session (python -m roszen.router on a free port)."""
+    from roszen.testing import router
+    with router() as port:
+        yield port
+
+
+_domain = [40]
+
+
+@pytest.fixture
+def router_env(router_port, monkeypatch):
+    """Env dict for node processes on the session router, with a fresh ROS_DOMAIN_ID per test.
+
+    The same variables are set in this process, so in-process contexts join the same graph.
+    """
+    from roszen.testing import zenoh_env
+    _domain[0] += 1
+    env = zenoh_env(router_port, domain_id=_domain[0] % 200)
+    for k in ("ZENOH_CONFIG_OVERRIDE", "ROS_DOMAIN_ID"):
+        monkeypatch.setenv(k, env[k])
+    return env
