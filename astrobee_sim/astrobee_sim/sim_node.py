@@ -282,7 +282,7 @@ class SimNode:
             _vec(bs.velocity, st.velocity)
             _vec(bs.omega, st.omega)
             bs.deformation = float(st.deformation)
-            bs.attached = [bool(a) for a in st.attached]
+            bs.attached = np.array(st.attached, dtype=bool)
             self.pub_bag.publish(bs)
             ts = M["tfs"]()
             ts.header = bs.header

@@ -165,6 +165,7 @@ class Simulation:
         self.flight_mode = flight_modes.get(mode)
         self.time = 0.0
         self.steps = 0
+        self._bag_memo = None
         self.last_command = {n: 0.0 for n in self.robots}
         self.fault = {n: False for n in self.robots}
         self.rejected = 0
@@ -238,7 +239,7 @@ class Simulation:
                     out.append(Contact(name, "iss", np.array(cp[5]), np.array(cp[7]), float(cp[9])))
         if fem:
             x = self.bag.points()
-            d, i = self.world.nearest(x)
+            d, i = self._bag_nearest()
             if d < 0.01:
                 out.append(Contact("bag", "iss", x[i].copy(), np.zeros(3), 0.0))
         return out
@@ -248,8 +249,16 @@ class Simulation:
         half = float(config.astrobee().get("envelope", 0.32)) / 2
         pts = np.array([r.pose()[0] for r in self.robots.values()])
         rc = self.world.clearance(pts) - half if len(pts) else -1.0
-        bc = self.world.clearance(self.bag.points()) if self.bag is not None else -1.0
+        bc = self._bag_nearest()[0] if self.bag is not None else -1.0
         return rc, bc
+
+    def _bag_nearest(self) -> tuple[float, int]:
+        """World.nearest of the bag's points, computed once per physics step."""
+        memo = getattr(self, "_bag_memo", None)
+        if memo is None or memo[0] != self.steps or memo[1] is not self.bag:
+            memo = (self.steps, self.bag, self.world.nearest(self.bag.points()))
+            self._bag_memo = memo
+        return memo[2]
 
     # ---- snapshot ------------------------------------------------------------------------
     def snapshot(self) -> dict:
@@ -262,6 +271,7 @@ class Simulation:
 
     def restore(self, snap: dict) -> None:
         self.p.restoreState(stateId=snap["state"], physicsClientId=self.client)
+        self._bag_memo = None
         if self.bag is not None:
             self.bag.restore(snap["bag"])
         self.time, self.steps = snap["time"], snap["steps"]
