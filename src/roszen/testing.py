@@ -116,29 +116,64 @@ def router(port: Optional[int] = None, timeout: float = 10.0) -> Iterator[int]:
         stop(p)
 
 
+def _line_queue(p: subprocess.Popen, stream: str):
+    """A queue fed by a daemon thread reading p's stream line by line (None at EOF)."""
+    import queue
+    import threading
+    qs = p.__dict__.setdefault("_roszen_line_queues", {})
+    q = qs.get(stream)
+    if q is None:
+        q = queue.SimpleQueue()
+        f = getattr(p, stream)
+
+        def pump() -> None:
+            try:
+                for line in f:
+                    q.put(line.rstrip("\n"))
+            except (ValueError, OSError):
+                pass
+            q.put(None)
+        threading.Thread(target=pump, daemon=True).start()
+        qs[stream] = q
+    return q
+
+
 def read_until(p: subprocess.Popen, needle: str, timeout: float = 10.0, stream: str = "stdout") -> list:
     """Read lines from p's stdout (or stderr) until one contains needle; returns the lines read.
 
     Raises TimeoutError (with the lines seen) when the bounded wait passes or the process exits.
     """
-    import selectors
-    f = getattr(p, stream)
-    sel = selectors.DefaultSelector()
-    sel.register(f, selectors.EVENT_READ)
+    import queue
+    q = _line_queue(p, stream)
     lines: list = []
     end = time.monotonic() + timeout
+    while True:
+        rem = end - time.monotonic()
+        if rem <= 0:
+            raise TimeoutError(f"{needle!r} not seen in {timeout} s; got {lines[-20:]}")
+        try:
+            line = q.get(timeout=rem)
+        except queue.Empty:
+            continue
+        if line is None:
+            q.put(None)
+            raise TimeoutError(f"process exited ({p.poll()}) before {needle!r}; got {lines[-20:]}")
+        lines.append(line)
+        if needle in line:
+            return lines
+
+
+def drain(p: subprocess.Popen, stream: str = "stdout", wait: float = 0.0) -> list:
+    """Lines already read from p's stream (waiting up to `wait` s for the first one)."""
+    import queue
+    q = _line_queue(p, stream)
+    out: list = []
     try:
-        while True:
-            rem = end - time.monotonic()
-            if rem <= 0:
-                raise TimeoutError(f"{needle!r} not seen in {timeout} s; got {lines[-20:]}")
-            if not sel.select(rem):
-                continue
-            line = f.readline()
-            if not line:
-                raise TimeoutError(f"process exited ({p.poll()}) before {needle!r}; got {lines[-20:]}")
-            lines.append(line.rstrip("\n"))
-            if needle in line:
-                return lines
-    finally:
-        sel.unregister(f)
+        line = q.get(timeout=wait) if wait > 0 else q.get_nowait()
+        while line is not None:
+            out.append(line)
+            line = q.get_nowait()
+        q.put(None)
+    except queue.Empty:
+        pass
+    return out
