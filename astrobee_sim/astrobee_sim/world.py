@@ -184,11 +184,13 @@ def module_colour(name: str) -> tuple[float, float, float]:
 
 def build_pybullet(world: World, client: int, visuals: bool = False,
                    per_body: int = 64) -> list[int]:
-    """Add the wall slabs to a pybullet client as a few static compound bodies; returns their ids.
+    """Add the wall slabs to a pybullet client as static bodies; returns their ids.
 
-    Each body holds up to `per_body` box children (convex, so soft-body contacts work). Measured
-    here: 322 separate static bodies cost ~22 us a physics step, 6 compounds ~3 us, and
-    multibodies with fixed links far more.
+    per_body > 1: compound bodies of up to `per_body` boxes (cheap: 322 separate static bodies
+    cost ~22 us a physics step here, 6 compounds ~3 us; multibodies with fixed links far more),
+    for rigid-only worlds: pybullet's soft bodies do not collide properly with compounds
+    (measured: FEM nodes sank through). per_body <= 1 (FEM worlds) or visuals: one plain box
+    body per slab.
     """
     import pybullet as p
     ids = []
@@ -196,7 +198,9 @@ def build_pybullet(world: World, client: int, visuals: bool = False,
     w = world.walls
     half = ((w[:, 3:] - w[:, :3]) / 2).tolist()
     pos = ((w[:, 3:] + w[:, :3]) / 2).tolist()
-    if per_body <= 1:      # one plain (non-compound) static box per slab
+    if per_body <= 1 or visuals:
+        # one plain (non-compound) static box per slab; also the GUI path: per-slab colours
+        # need separate visual shapes (pybullet 3.2.7 crashed on compound visual arrays here)
         for k in range(len(w)):
             col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half[k], physicsClientId=client)
             vis = -1
@@ -212,14 +216,8 @@ def build_pybullet(world: World, client: int, visuals: bool = False,
         n = len(half[sl])
         col = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=half[sl],
                                           collisionFramePositions=pos[sl], physicsClientId=client)
-        vis = -1
-        if visuals:
-            vis = p.createVisualShapeArray(
-                [p.GEOM_BOX] * n, halfExtents=half[sl], visualFramePositions=pos[sl],
-                rgbaColors=[[*module_colour(o), 0.35] for o in owner[sl]], physicsClientId=client)
         ids.append(p.createMultiBody(baseMass=0, baseCollisionShapeIndex=col,
-                                     baseVisualShapeIndex=vis, useMaximalCoordinates=True,
-                                     physicsClientId=client))
+                                     useMaximalCoordinates=True, physicsClientId=client))
     return ids
 
 

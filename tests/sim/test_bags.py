@@ -69,3 +69,12 @@ def test_unknown_model_or_variant(make_sim):
     with pytest.raises(ScenarioError):
         make_sim("no_such_scenario")
     assert set(VARIANTS) == {"front", "right", "top", "front_back", "right_left", "top_bottom"}
+
+
+def test_robot_list_override(make_sim):
+    sim = make_sim("node2_to_jem", robots=["", "honey"])
+    assert list(sim.robots) == ["", "honey"]
+    a, b = sim.robot_state("")[0], sim.robot_state("honey")[0]
+    assert np.linalg.norm(a - b) > 0.5
+    assert sim.world.in_free_space(np.array([a, b])).all()
+    assert sim.command([0.1, 0, 0, 0, 0, 0], "honey") and not sim.command([0.1] * 6, "nobody")

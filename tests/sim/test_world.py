@@ -64,3 +64,20 @@ def test_pruned_queries_match_brute_force():
         assert np.allclose(w.wall_distance(pts), brute)
         d, i = w.nearest(pts)
         assert np.isclose(d, brute.min()) and np.isclose(brute[i], d)
+
+
+def test_build_pybullet_plain_and_compound_with_visuals():
+    import pybullet as p
+    from astrobee_sim.world import build_pybullet
+    w = World.from_config(thickness=0.25)
+    c = p.connect(p.DIRECT)
+    try:
+        plain = build_pybullet(w, c, visuals=True, per_body=1)
+        compound = build_pybullet(w, c, visuals=False, per_body=64)
+        assert len(plain) == len(w.walls) and len(compound) == -(-len(w.walls) // 64)
+        # a ray across Node 2 hits a wall just outside the grown keep-in box
+        hit = p.rayTest([10.95, 0.0, 4.84], [10.95, 0.0, 10.0], physicsClientId=c)[0]
+        assert hit[0] in plain + compound
+        assert abs(hit[3][2] - w.free[16, 5]) < 1e-6
+    finally:
+        p.disconnect(c)
