@@ -12,19 +12,20 @@ class Executor:
 
     def __init__(self) -> None:
         self._ready: "queue.SimpleQueue" = queue.SimpleQueue()
-        self._lock = threading.Lock()
         self._nodes: list = []
         self._spin_lock = threading.Lock()
         self._shutdown = False
 
     # -- called from zenoh threads ------------------------------------------------------------
     def schedule(self, ent) -> None:
-        """Mark an entity with pending work; it is queued once until its buffer is drained."""
-        with self._lock:
-            if ent._scheduled:
-                return
+        """Mark an entity with pending work; it is queued once until its buffer is drained.
+
+        Lock-free: a lost wake-up is impossible because the executor re-checks the buffer after
+        clearing the flag; a duplicate entry in the ready queue is harmless (it finds no work).
+        """
+        if not ent._scheduled:
             ent._scheduled = True
-        self._ready.put(ent)
+            self._ready.put(ent)
 
     def wake(self) -> None:
         self._ready.put(None)
@@ -99,24 +100,49 @@ class Executor:
                 return self._run_due_timer()
             if ent is None:
                 return self._run_due_timer()
-            with self._lock:
-                item = ent._pop()
-                more = ent._has_work()
-                if not more:
-                    ent._scheduled = False
-            if more:
-                self._ready.put(ent)
+            return self._run_entity(ent, 1)
+
+    def _run_entity(self, ent, batch: int) -> bool:
+        """Run up to `batch` pending items of one entity, then requeue it if work is left."""
+        ran = False
+        for _ in range(batch):
+            item = ent._pop()
             if item is None:
-                return False
+                ent._scheduled = False
+                if ent._has_work():  # raced with a producer: take it back
+                    ent._scheduled = True
+                    self._ready.put(ent)
+                return ran
             ent._execute(item)
-            return True
+            ran = True
+        self._ready.put(ent)  # more may be pending: go to the back of the line (fairness)
+        return ran
+
+    def _spin_some(self, timeout_sec: float, batch: int = 32) -> None:
+        """spin()'s step: like spin_once but drains up to `batch` items of one entity."""
+        with self._spin_lock:
+            if self._run_due_timer():
+                return
+            wait = timeout_sec
+            tw = self._wait_for_timers()
+            if tw is not None:
+                wait = min(wait, tw)
+            try:
+                ent = self._ready.get(timeout=wait) if wait > 0 else self._ready.get_nowait()
+            except queue.Empty:
+                self._run_due_timer()
+                return
+            if ent is None:
+                self._run_due_timer()
+                return
+            self._run_entity(ent, batch)
 
     def spin(self) -> None:
         """Run callbacks until shutdown or every node is destroyed."""
         self._shutdown = False
         while not self._shutdown and any(n._alive for n in self._nodes) and \
                 all(n.context.ok() for n in self._nodes):
-            self.spin_once(0.5)
+            self._spin_some(0.5)
 
     def spin_until_future_complete(self, future, timeout_sec: Optional[float] = None) -> None:
         end = None if timeout_sec is None else time.monotonic() + timeout_sec

@@ -148,7 +148,7 @@ class Subscription(_Entity):
                     f"dropping sample on {self.topic_name} without the rmw_zenoh attachment "
                     f"(as rmw_zenoh does); further ones are dropped silently")
             return
-        item = (sample.payload.to_bytes(), att.to_bytes())
+        item = (sample.payload, att)
         if self._direct:
             self._execute(item)
             self.node._executor.wake()
@@ -157,7 +157,7 @@ class Subscription(_Entity):
         self.node._executor.schedule(self)
 
     def _execute(self, item) -> None:
-        data, att = item
+        data, att = item[0].to_bytes(), item[1]
         if self.raw:
             msg = data
         else:
@@ -172,9 +172,9 @@ class Subscription(_Entity):
             self.node.get_logger().error(
                 f"subscription callback for {self.topic_name} raised:\n{traceback.format_exc().rstrip()}")
 
-    def _report_bad(self, att: bytes, what: str) -> None:
+    def _report_bad(self, att, what: str) -> None:
         try:
-            src = wire.parse_attachment(att).gid.hex()
+            src = wire.parse_attachment(att.to_bytes()).gid.hex()
         except ValueError:
             src = "unknown publisher"
         self.node.get_logger().error(f"dropped a sample on {self.topic_name} from {src}: {what}")
