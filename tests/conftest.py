@@ -28,4 +28,6 @@ def router_env(router_port, monkeypatch):
     env = zenoh_env(router_port, domain_id=_domain[0] % 200)
     for k in ("ZENOH_CONFIG_OVERRIDE", "ROS_DOMAIN_ID"):
         monkeypatch.setenv(k, env[k])
-    return env
+    yield env
+    import roszen
+    roszen.shutdown()  # the next test's default context picks up its own domain
