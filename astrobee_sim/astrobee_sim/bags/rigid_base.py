@@ -1,0 +1,121 @@
+"""Shared machinery of the reduced (rigid-body) bag models: boxes, grasp constraints, state."""
+from __future__ import annotations
+
+import numpy as np
+
+from astrobee import rotations as rot
+
+from ..robot import qrot
+from .base import Bag, BagState, kabsch
+
+
+def box_body(p, client: int, half, mass: float, position, orientation, rgba=(0.8, 0.6, 0.3, 1),
+             maximal: bool = True) -> int:
+    """A dynamic box; maximal coordinates (a plain btRigidBody) unless asked otherwise."""
+    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=client)
+    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half), rgbaColor=list(rgba),
+                              physicsClientId=client)
+    b = p.createMultiBody(baseMass=mass, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis,
+                          basePosition=list(position), baseOrientation=list(orientation),
+                          useMaximalCoordinates=maximal, physicsClientId=client)
+    p.changeDynamics(b, -1, linearDamping=0, angularDamping=0,
+                     activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=client)
+    return b
+
+
+def to_frame(pos, orn, world_point) -> list[float]:
+    """World point expressed in the frame (pos, orn)."""
+    return rot.rotate_inverse(np.asarray(orn), np.asarray(world_point) - np.asarray(pos)).tolist()
+
+
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+
+
+class RigidPartsBag(Bag):
+    """A bag made of rigid bodies `self.parts` whose centres sit at `self.offsets` (bag frame)."""
+    parts: list[int]
+    offsets: np.ndarray
+
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self.constraints: list[int] = []
+
+    @property
+    def body_ids(self) -> list[int]:
+        return list(self.parts)
+
+    def set_pose(self, position, orientation) -> None:
+        q = rot.normalize(np.asarray(orientation, dtype=float))
+        for b, off in zip(self.parts, self.offsets):
+            self.p.resetBasePositionAndOrientation(
+                b, (np.asarray(position) + rot.rotate(q, off)).tolist(), q.tolist(),
+                physicsClientId=self.client)
+            self.p.resetBaseVelocity(b, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+
+    def part_for_handle(self, k: int) -> int:
+        """Index of the part holding handle k (nearest the handle point)."""
+        d = np.linalg.norm(self.offsets - self.handle_point(k), axis=1)
+        return int(d.argmin())
+
+    def p2p(self, robot, part: int, world_point, max_force: float) -> int:
+        """A point-to-point constraint between the robot's gripper and `part` at a world point."""
+        p, c = self.p, self.client
+        link = robot.links["gripper"]
+        ls = p.getLinkState(robot.id, link, computeForwardKinematics=True, physicsClientId=c)
+        body = self.parts[part]
+        bp, bq = p.getBasePositionAndOrientation(body, physicsClientId=c)
+        cid = p.createConstraint(robot.id, link, body, -1, p.JOINT_POINT2POINT, [0, 0, 0],
+                                 to_frame(ls[0], ls[1], world_point), to_frame(bp, bq, world_point),
+                                 physicsClientId=c)
+        p.changeConstraint(cid, maxForce=max_force, physicsClientId=c)
+        self.constraints.append(cid)
+        return cid
+
+    def release(self) -> None:
+        for cid in self.constraints:
+            self.p.removeConstraint(cid, physicsClientId=self.client)
+        self.constraints = []
+        self.attached = [False] * len(self.handles)
+
+    def _poses(self):
+        P, Q, V, W = [], [], [], []
+        for b in self.parts:
+            pos, q = self.p.getBasePositionAndOrientation(b, physicsClientId=self.client)
+            v, w = self.p.getBaseVelocity(b, physicsClientId=self.client)
+            P.append(pos); Q.append(q); V.append(v); W.append(w)
+        return np.array(P), np.array(Q), np.array(V), np.array(W)
+
+    def state(self) -> BagState:
+        P, Q, V, W = self._poses()
+        if len(self.parts) == 1:
+            q = Q[0]
+            return BagState(P[0] - qrot(q, self.offsets[0]), q, V[0], W[0], 0.0, list(self.attached))
+        q, c = kabsch(self.offsets, P)
+        R = np.array(self.p.getMatrixFromQuaternion(q.tolist())).reshape(3, 3)
+        mean_off = self.offsets.mean(axis=0)
+        pos = c - R @ mean_off
+        v = V.mean(axis=0)
+        r = P - c
+        # least-squares omega from the parts' relative velocities (v_i - v = omega x r_i):
+        # normal equations sum(|r|^2 I - r r^T) omega = sum r x (v_i - v)
+        J = np.eye(3) * np.einsum("ij,ij->", r, r) - r.T @ r
+        w = np.linalg.solve(J, np.cross(r, V - v).sum(axis=0))
+        rest = c + (self.offsets - mean_off) @ R.T
+        deform = float(np.sqrt(np.mean(np.sum((P - rest) ** 2, axis=1))))
+        return BagState(pos, q, v, w, deform, list(self.attached))
+
+    def points(self) -> np.ndarray:
+        """Corners of every part."""
+        p, c = self.p, self.client
+        out = []
+        for b, half in zip(self.parts, self.half_extents):
+            pos, q = p.getBasePositionAndOrientation(b, physicsClientId=c)
+            R = np.array(p.getMatrixFromQuaternion(q)).reshape(3, 3)
+            out.append(np.asarray(pos) + (_CORNERS * half) @ R.T)
+        return np.concatenate(out)
+
+    def snapshot(self):
+        return None   # rigid parts are covered by the simulation's saveState
+
+    def restore(self, snap) -> None:
+        pass
