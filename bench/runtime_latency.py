@@ -233,7 +233,8 @@ def main(argv=None) -> int:
             stop(rx)
             roszen.shutdown()
 
-    print(f"\nroszen (rmw_zenoh wire) vs bare zenoh {zenoh.__version__ if hasattr(zenoh, '__version__') else ''}, "
+    from importlib.metadata import version
+    print(f"\nroszen (rmw_zenoh wire) vs bare zenoh {version('eclipse-zenoh')}, "
           f"cross-process via a local router, {'full' if args.full else 'quick'} run")
     print(f"{'metric':40s} {'roszen':>12s} {'bare zenoh':>12s} {'ratio':>7s}")
     for name, a, b in rows:
