@@ -51,7 +51,7 @@ def test_snapshot_restore(make_sim, model):
     assert np.allclose(st.position, bag0.position, atol=1e-9)
     assert np.allclose(st.velocity, bag0.velocity, atol=1e-9)
     # continuing after the restore: near exact for the rigid models (saveState does not hold
-    # the constraint solver's warm-start impulses of maximal-coordinate bodies: ~1e-7 m);
+    # the constraint solver's warm-start impulses of maximal-coordinate bodies: 1e-8..3e-7 m);
     # for FEM the node velocities cannot be restored in pybullet 3.2.7 (they keep those of
     # the moment of the restore)
     drive(sim, 40)
@@ -62,4 +62,4 @@ def test_snapshot_restore(make_sim, model):
     if model == "fem":
         assert cont_nodes < 0.05
     else:
-        assert cont < 1e-6
+        assert cont < 1e-5
