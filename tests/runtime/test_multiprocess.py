@@ -74,7 +74,9 @@ def test_graph_seen_from_third_process_and_kill9(router_env):
             g = ctx.graph
             assert g.wait_ready(5.0)
             assert g.wait_for(lambda: ("adder", "/") in g.get_node_names_and_namespaces()
-                              and ("peer_listener", "/g1") in g.get_node_names_and_namespaces(), 10)
+                              and ("peer_listener", "/g1") in g.get_node_names_and_namespaces()
+                              and g.count_subscribers("/graph_topic") == 1 and g.count_services("/graph_srv") == 1,
+                              10)
             topics = dict(g.get_topic_names_and_types())
             assert topics["/graph_topic"] == ["std_msgs/msg/String"]
             services = dict(g.get_service_names_and_types())
