@@ -52,7 +52,12 @@ def _launch(argv: list[str]) -> int:
                    help="seconds a child gets to exit after SIGINT before SIGTERM (default 5)")
     p.add_argument("--sigterm-timeout", type=float, default=3.0,
                    help="seconds after SIGTERM before SIGKILL (default 3)")
+    p.add_argument("--stop-grace", type=float, default=0.75,
+                   help="seconds between the nodes' exit and stopping the recorder, so it "
+                        "records their last messages (default 0.75)")
     a = p.parse_args(argv)
+    if a.stop_grace < 0:
+        raise CliError(f"--stop-grace must be >= 0, got {a.stop_grace:g}")
     if a.list or not a.name:
         print("\n".join(launcher.list_descriptions()))
         return 0 if a.list else 2
@@ -73,7 +78,7 @@ def _launch(argv: list[str]) -> int:
         return launcher.launch(a.name, arguments, port=a.port, use_ros2=a.ros2,
                                run_dir=Path(a.run_dir) if a.run_dir else None, registry=NODES,
                                sigint_timeout=a.sigint_timeout,
-                               sigterm_timeout=a.sigterm_timeout)
+                               sigterm_timeout=a.sigterm_timeout, stop_grace=a.stop_grace)
     except launcher.LaunchError as exc:
         raise CliError(str(exc)) from None
 

@@ -3,7 +3,9 @@
 Each node runs as `ros2 run PKG EXE` when a ROS 2 install with rmw_zenoh is present, as
 `astrobee run PKG EXE` otherwise. Output is prefixed per node (coloured on a tty). Ctrl-C,
 SIGTERM or the exit of a required node stops every child: SIGINT, then SIGTERM, then SIGKILL
-to its process group, each after a bounded wait. The exit status is non-zero when a node failed.
+to its process group, each after a bounded wait; the nodes first, then (after a short grace so
+it receives their last messages) the recorder, the router last. The exit status is non-zero
+when a node failed.
 """
 from __future__ import annotations
 
@@ -42,7 +44,8 @@ class NodeSpec:
     `--ros-args` items (remaps); `required`: its exit stops the launch; `command` replaces
     package/executable with arguments of the `astrobee` command (router, bag record), and
     `ros2_command` with the full argv used instead when running under ROS 2; `argv` starts
-    any other program as is.
+    any other program as is. `stop_last` (default for the recorder): stopped after every
+    other node, once the launcher's `stop_grace` has passed, so it records their last messages.
     """
 
     name: str
@@ -58,6 +61,11 @@ class NodeSpec:
     ros2_command: list[str] | None = None
     env: dict[str, str] = field(default_factory=dict)
     kind: str = "node"          # node | router | recorder | client
+    stop_last: bool | None = None   # None: True for kind "recorder"
+
+    @property
+    def stops_last(self) -> bool:
+        return self.kind == "recorder" if self.stop_last is None else self.stop_last
 
 
 @dataclass
@@ -161,7 +169,7 @@ class Launcher:
     def __init__(self, specs: list[NodeSpec], *, use_ros2: bool = False, port: int = 7447,
                  run_dir: Path | None = None, colour: bool | None = None,
                  sigint_timeout: float = 5.0, sigterm_timeout: float = 3.0,
-                 out=None, astrobee_cmd: list[str] | None = None,
+                 stop_grace: float = 0.75, out=None, astrobee_cmd: list[str] | None = None,
                  registry: dict | None = None):
         self.specs = specs
         self.use_ros2 = use_ros2
@@ -171,6 +179,7 @@ class Launcher:
         self.colour = self.out.isatty() if colour is None else colour
         self.sigint_timeout = sigint_timeout
         self.sigterm_timeout = sigterm_timeout
+        self.stop_grace = stop_grace
         self.astrobee_cmd = astrobee_cmd or [sys.executable, "-m", "astrobee.cli"]
         self.registry = registry
         self.procs: list[tuple[NodeSpec, subprocess.Popen]] = []
@@ -278,21 +287,32 @@ class Launcher:
         raise LaunchError(f"router did not listen on port {self.port} within {timeout:.0f} s")
 
     def stop_all(self) -> None:
-        """SIGINT every live child (reverse start order, router last), then SIGTERM, SIGKILL."""
+        """Stop every live child in three stages: the nodes (reverse start order), then after
+        `stop_grace` s the stop-last ones (the recorder: it gets the nodes' final messages and
+        closes its bag), the router last. Each stage: SIGINT, SIGTERM, SIGKILL, bounded waits."""
         live = [(s, p) for s, p in reversed(self.procs) if p.poll() is None]
         routers = [(s, p) for s, p in live if s.kind == "router"]
-        others = [(s, p) for s, p in live if s.kind != "router"]
-        for group in (others, routers):
-            self._signal_wait(group, signal.SIGINT, self.sigint_timeout)
-            self._signal_wait(group, signal.SIGTERM, self.sigterm_timeout)
-            for s, p in group:
-                if p.poll() is None:
-                    self.log(f"'{s.name}' ignored SIGINT and SIGTERM: SIGKILL")
-                    self.failed.append(s.name)
-                    _killpg(p, signal.SIGKILL)
-                    p.wait()
+        last = [(s, p) for s, p in live if s.kind != "router" and s.stops_last]
+        others = [(s, p) for s, p in live if s.kind != "router" and not s.stops_last]
+        self._stop_group(others)
+        if last and self.stop_grace > 0 and any(s.kind != "router" and not s.stops_last
+                                                for s, _ in self.procs):
+            # messages the nodes sent just before exiting may still be on their way
+            time.sleep(self.stop_grace)
+        self._stop_group(last)
+        self._stop_group(routers)
         for t in self._threads:
             t.join(timeout=2.0)
+
+    def _stop_group(self, group) -> None:
+        self._signal_wait(group, signal.SIGINT, self.sigint_timeout)
+        self._signal_wait(group, signal.SIGTERM, self.sigterm_timeout)
+        for s, p in group:
+            if p.poll() is None:
+                self.log(f"'{s.name}' ignored SIGINT and SIGTERM: SIGKILL")
+                self.failed.append(s.name)
+                _killpg(p, signal.SIGKILL)
+                p.wait()
 
     def _signal_wait(self, group, sig, timeout) -> None:
         pending = [(s, p) for s, p in group if p.poll() is None]
@@ -370,7 +390,8 @@ def _killpg(proc: subprocess.Popen, sig: int) -> None:
 
 def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: Path | None = None,
            use_ros2: bool | None = None, registry: dict | None = None,
-           sigint_timeout: float = 5.0, sigterm_timeout: float = 3.0) -> int:
+           sigint_timeout: float = 5.0, sigterm_timeout: float = 3.0,
+           stop_grace: float = 0.75) -> int:
     """Build launch description `name` with `arguments` and run it; the exit status."""
     use_ros2 = ros2_available() if use_ros2 is None else use_ros2
     if run_dir is None:
@@ -380,7 +401,8 @@ def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: P
     generate = load_description(name)
     specs = generate(ctx)
     launcher = Launcher(specs, use_ros2=use_ros2, port=port, run_dir=run_dir, registry=registry,
-                        sigint_timeout=sigint_timeout, sigterm_timeout=sigterm_timeout)
+                        sigint_timeout=sigint_timeout, sigterm_timeout=sigterm_timeout,
+                        stop_grace=stop_grace)
     status = launcher.run()
     # optional `post_run(ctx, status)` of the description: runs once every process has stopped
     # (the bag is closed), e.g. the mission's plots read back from the recorded bag

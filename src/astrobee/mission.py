@@ -31,6 +31,11 @@ IDLE, STOPPED, STOPPING, CONTROLLING = 1, 2, 4, 9
 NAMES = {0: "INITIALIZING", 1: "IDLE", 2: "STOPPED", 3: "IDLING", 4: "STOPPING", 9: "CONTROLLING"}
 
 
+# After a fault (the sim's propulsion watchdog: the controller is gone) the leg ends once the
+# robot has been watched coasting this long (sim s), or this many wall s (a slow lockstep sim).
+FAULT_WATCH_SIM, FAULT_WATCH_WALL = 0.5, 3.0
+
+
 class Interrupted(Exception):
     """SIGINT/SIGTERM arrived while flying."""
 
@@ -294,7 +299,20 @@ class MissionClient:
         def controlling_seen() -> bool:
             return any(s == CONTROLLING for _, s, _ in self.mob_changes[n_changes:])
 
+        fault_seen: dict[str, float] = {}
+
+        def faulted() -> bool:
+            """A fault arrived during the flight and the robot was watched for a while since."""
+            if not self.faults:
+                return False
+            if not fault_seen:
+                fault_seen.update(sim=self.sim_time, wall=time.monotonic())
+            return (self.sim_time - fault_seen["sim"] >= FAULT_WATCH_SIM
+                    or time.monotonic() - fault_seen["wall"] >= FAULT_WATCH_WALL)
+
         def finished() -> bool:
+            if faulted():
+                return True
             seen = False
             for _, s, _ in self.mob_changes[n_changes:]:
                 seen = seen or s == CONTROLLING
@@ -314,6 +332,13 @@ class MissionClient:
 
         self.spin_until(controlling_seen, 30.0, "the controller to accept the segment", tick)
         self.spin_until(finished, wall_timeout, "the end of the flight", tick)
+        if fault_seen:
+            res.sim_t1, res.wall_t1 = self.sim_time, time.time()
+            res.sim_time = self.sim_time - t_sent
+            if self.pose is not None:
+                res.final_position_error = float(np.linalg.norm(self.pose[0] - goal_p))
+                res.final_attitude_error = rot.angle_between(self.pose[1], goal_q)
+            raise MissionError(f"flight aborted on a fault: {self.faults[0]}")
         t_end = next(t for t, s, _ in self.mob_changes[n_changes:] if s in (STOPPED, IDLE)
                      and any(s2 == CONTROLLING for _, s2, _ in self.mob_changes[n_changes:]))
         res.sim_t1 = self.sim_time

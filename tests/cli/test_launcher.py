@@ -162,3 +162,52 @@ exec sleep 60
     p.signal(signal.SIGINT)
     assert p.wait(timeout=30) == 0
     assert _all_dead(_pids(p).values()) is True
+
+
+_NODE = """
+import signal, sys, time
+def stop(*_):
+    time.sleep(0.3)                       # a node finishing its work after SIGINT
+    open(sys.argv[1], "a").write("node last words\\n")
+    sys.exit(0)
+signal.signal(signal.SIGINT, stop)
+print("up", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+_RECORDER = """
+import signal, sys, time
+def stop(*_):
+    with open(sys.argv[1], "a") as f:
+        f.write("recorder stopped\\n")
+    sys.exit(0)
+signal.signal(signal.SIGINT, stop)
+print("up", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+def test_recorder_is_stopped_after_the_nodes(tmp_path):
+    """Shutdown order: every node has exited (and the grace passed) before the recorder gets
+    SIGINT, so what the nodes send last reaches the bag."""
+    import io
+    import sys
+    log = tmp_path / "order.txt"
+    specs = [NodeSpec("recorder", kind="recorder", required=False,
+                      argv=[sys.executable, "-c", _RECORDER, str(log)]),
+             NodeSpec("node", required=False, argv=[sys.executable, "-c", _NODE, str(log)]),
+             NodeSpec("quitter", required=True, argv=[sys.executable, "-c",
+                                                      "import time; time.sleep(1.0)"])]
+    out = io.StringIO()
+    launcher = Launcher(specs, out=out, colour=False, stop_grace=0.2)
+    assert launcher.run() == 0, out.getvalue()
+    assert log.read_text().splitlines() == ["node last words", "recorder stopped"], out.getvalue()
+    assert all(p.poll() is not None for _, p in launcher.procs)
+    # with the old single-stage stop the recorder was signalled with the nodes: it would
+    # have written first; an explicit stop_last=False restores that order
+    log.unlink()
+    specs[0].stop_last = False
+    launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
+    launcher.run()
+    assert log.read_text().splitlines() == ["recorder stopped", "node last words"]

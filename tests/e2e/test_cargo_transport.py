@@ -143,13 +143,15 @@ def launches():
 
 def mcap_messages(bag_dir: Path) -> dict[str, list]:
     """Every message of the bag decoded by an independent reader (mcap-ros2-support)."""
-    from mcap_ros2.reader import read_ros2_messages
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
     files = sorted(bag_dir.glob("*.mcap"))
     assert files, f"no MCAP file in {bag_dir}"
     out: dict[str, list] = {}
-    for f in files:
-        for m in read_ros2_messages(str(f)):
-            out.setdefault(m.channel.topic, []).append(m.ros_msg)
+    for path in files:
+        with open(path, "rb") as f:
+            for m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+                out.setdefault(m.channel.topic, []).append(m.decoded_message)
     return out
 
 
@@ -176,9 +178,18 @@ def test_flight_reaches_goal_and_bag_decodes(tmp_path, config_dir, launches):
         assert not pid_alive(pid)
 
 
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
 def test_controller_killed_midflight(tmp_path, config_dir, launches):
+    """The controller dies: the sim's watchdog stops the thrust and raises a fault, the mission
+    ends the leg on it, the launcher reports the failure and stops the others; the bag (the
+    recorder is stopped last) holds the fault and the coasting robot."""
+    from astrobee import flight_modes
     run = tmp_path / "run"
-    launch = Launch(run, config_dir, "scenario:=short_hop")
+    # lockstep_timeout: without a controller the sim steps on every 0.05 s (default 1 s)
+    launch = Launch(run, config_dir, "scenario:=short_hop", "lockstep_timeout:=0.05")
     launches.append(launch)
     launch.read_until(r"CONTROLLING t=", timeout=120.0)
     pids = launch.child_pids()
@@ -191,8 +202,22 @@ def test_controller_killed_midflight(tmp_path, config_dir, launches):
         assert not pid_alive(pid)
     summary = json.loads((run / "summary.json").read_text())
     assert not summary["success"]
-    # the watchdog's side (robot stopped, fault raised) is in test_watchdog.py: here the
-    # launcher stops the sim within a few ticks of the controller's death
+    assert "propulsion_watchdog" in summary["reason"], summary["reason"]
+
+    msgs = mcap_messages(run / "bag")
+    faults = [m for m in msgs.get("/sim/fault", []) if m.active]
+    assert faults, f"no active fault in the bag: {msgs.get('/sim/fault')}"
+    assert faults[0].source == "sim/propulsion_watchdog" and faults[0].code == 1
+    t_fault = stamp(faults[0])
+    speeds = [(stamp(m), float(np.linalg.norm([m.twist.linear.x, m.twist.linear.y,
+                                               m.twist.linear.z])))
+              for m in msgs["/loc/truth/twist"]]
+    v_fault = max(v for t, v in speeds if t <= t_fault + 1e-6 and t > t_fault - 0.05)
+    after = [v for t, v in speeds if t > t_fault]
+    assert len(after) >= 5, "the bag ends at the fault: the robot's coasting is not recorded"
+    # propulsion stopped: the speed does not grow, and stays under the flight mode's limit
+    assert max(after) <= v_fault + 0.01, (v_fault, max(after))
+    assert max(after) < flight_modes.get("nominal").hard_limit_vel
 
 
 def test_sigint_leaves_nothing_behind(tmp_path, config_dir, launches):

@@ -3,10 +3,14 @@
 Launch arguments (`name:=value`): scenario (config/scenarios/<name>.yaml, default
 node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <run>/bag),
 clock (realtime | fast | lockstep; default lockstep headless: the sim waits for each
-command, as fast as the graph answers; realtime with gui), gui (true |
+command, as fast as the graph answers; realtime with gui), lockstep_timeout (wall s the sim
+waits for a tick's command before stepping on; the sim's default when unset), gui (true |
 false), mission (true | false: run the mission client, default true), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
+With the mission running, the controller's death does not end the launch by itself: the sim's
+watchdog stops the robot and raises a fault, the mission ends the leg on it (failed) and
+exits, so the bag holds the fault and the coasting robot. Without it, the controller is required.
 """
 from __future__ import annotations
 
@@ -34,15 +38,25 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     if clock not in ("realtime", "fast", "lockstep"):
         raise LaunchError(f"clock must be realtime, fast or lockstep, got '{clock}'")
     common = {"scenario": scenario, "use_sim_time": True}
+    sim_params = {**common, "clock_mode": clock, "gui": gui}
+    if ctx.arg("lockstep_timeout"):
+        try:
+            sim_params["lockstep_timeout"] = float(ctx.arg("lockstep_timeout"))
+        except ValueError:
+            raise LaunchError(f"lockstep_timeout must be a number of seconds, "
+                              f"got '{ctx.arg('lockstep_timeout')}'") from None
+        if not sim_params["lockstep_timeout"] > 0:
+            raise LaunchError("lockstep_timeout must be > 0")
+    mission = ctx.flag("mission", True)
     port = ctx.port
     nodes = [
         NodeSpec("router", kind="router", command=["router", "--port", str(port)],
                  ros2_command=["ros2", "run", "rmw_zenoh_cpp", "rmw_zenohd"]),
         NodeSpec("sim_node", "astrobee_sim", "sim_node",
-                 parameters=[{**common, "clock_mode": clock, "gui": gui}]),
+                 parameters=[sim_params]),
         NodeSpec("planner_node", "astrobee_planning", "planner_node", parameters=[common]),
         NodeSpec(ctl_name, "astrobee_control", ctl_name,
-                 parameters=[ctl_params, {"use_sim_time": True}]),
+                 parameters=[ctl_params, {"use_sim_time": True}], required=not mission),
     ]
     if ctx.flag("record", True):
         bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
@@ -50,7 +64,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
                               command=["bag", "record", "-a", "-o", bag_dir],
                               ros2_command=["ros2", "bag", "record", "-a", "-s", "mcap",
                                             "-o", bag_dir]))
-    if ctx.flag("mission", True):
+    if mission:
         import sys
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         nodes.append(NodeSpec("mission", "astrobee", "mission", kind="client",

@@ -112,6 +112,10 @@ class Recorder:
             if self.discovery and self._changed.is_set():
                 self._changed.clear()
                 self.discover()
+        # samples already received but not yet dispatched belong in the bag (bounded: 2 s)
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end and self.node.spin_once(timeout_sec=0):
+            pass
 
     def close(self) -> None:
         self.node.context.graph.remove_listener(self._changed.set)
