@@ -26,7 +26,7 @@ commands:
   run PKG EXE [--ros-args ...]   start one node (like `ros2 run`)
   launch NAME [arg:=value ...]   start a launch description (astrobee/launch/NAME.py)
   router [--port P]              run the Zenoh router (rmw_zenohd equivalent)
-  topic | service | node | interface | bag   ros2-style verbs (`astrobee topic -h`)
+  topic | service | node | param | interface | bag   ros2-style verbs (`astrobee topic -h`)
 """
 
 

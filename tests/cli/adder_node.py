@@ -1,6 +1,7 @@
 """A tiny node of ours for the CLI tests: serves /add_two_ints (example_interfaces/AddTwoInts)
 and /trigger (std_srvs/Trigger), publishes /adder/count (std_msgs/Int32) at 10 Hz and a
-latched /adder/mode (std_msgs/String)."""
+latched /adder/mode (std_msgs/String); parameters `increment` (int, the count's step), `label`
+(string), `gain` (double), `weights` (double array) for `param` verbs."""
 import sys
 
 from roszen import LATCHED, Node, message_class
@@ -26,10 +27,14 @@ def main() -> int:
     count_pub = node.create_publisher("std_msgs/msg/Int32", "/adder/count", 10)
     mode = node.create_publisher("std_msgs/msg/String", "/adder/mode", LATCHED)
     mode.publish(String(data="adding"))
+    node.declare_parameter("increment", 1)
+    node.declare_parameter("label", "adder")
+    node.declare_parameter("gain", 0.5)
+    node.declare_parameter("weights", [1.0, 2.0])
     n = [0]
 
     def tick():
-        n[0] += 1
+        n[0] += node.get_parameter("increment").value
         count_pub.publish(Int32(data=n[0]))
 
     node.create_timer(0.1, tick)

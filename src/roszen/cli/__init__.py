@@ -10,17 +10,18 @@ import sys
 
 from roszen.cli.common import CliError, line_buffered
 
-VERBS = ("topic", "service", "node", "interface", "bag", "run", "router")
+VERBS = ("topic", "service", "node", "param", "interface", "bag", "run", "router")
 
 
 def build_parser(prog: str) -> argparse.ArgumentParser:
-    from roszen.cli import bagcmd, graphcmd, interface, service, topic
+    from roszen.cli import bagcmd, graphcmd, interface, param, service, topic
     p = argparse.ArgumentParser(prog=prog, description="ros2-style tools over rmw_zenoh")
     sub = p.add_subparsers(dest="verb", metavar="verb")
     sub.required = True
     topic.add_parser(sub)
     service.add_parser(sub)
     graphcmd.add_parser(sub)
+    param.add_parser(sub)
     interface.add_parser(sub)
     bagcmd.add_parser(sub)
     _router_args(sub.add_parser("router", help="run the Zenoh router (rmw_zenohd equivalent)"))
