@@ -188,3 +188,51 @@ def safe_set(carry_extent: float | np.ndarray = 0.0, radius: float | None = None
 
 def extent_rows(b: np.ndarray) -> np.ndarray:
     return b[:, 3:] - b[:, :3]
+
+
+def tube_boxes(boxes: np.ndarray, rounds: int = 3, min_cross: float = 0.1,
+               touch_tol: float = 1e-6) -> np.ndarray:
+    """Chains of up to `rounds`+1 keep-in boxes merged along one axis: the span of the chain
+    along that axis times the intersection of their cross-sections (at least `min_cross` m
+    across). Each lies inside the union of its chain, and unlike pairwise passage boxes it stays
+    long enough to hold an elongated load through two consecutive hatch boxes."""
+    raw = np.asarray(boxes, dtype=float)
+    out = []
+    for ax in range(3):
+        oth = [k for k in range(3) if k != ax]
+        lo_o, hi_o = np.array(oth), np.array(oth) + 3
+        cur = list(raw)
+        for _ in range(rounds):
+            new = []
+            for t in cur:
+                for b in raw:
+                    if b[ax] > t[ax + 3] + touch_tol or b[ax + 3] < t[ax] - touch_tol:
+                        continue
+                    clo, chi = np.maximum(t[lo_o], b[lo_o]), np.minimum(t[hi_o], b[hi_o])
+                    if np.any(chi - clo < min_cross):
+                        continue
+                    m = t.copy()
+                    m[lo_o], m[hi_o] = clo, chi
+                    m[ax], m[ax + 3] = min(t[ax], b[ax]), max(t[ax + 3], b[ax + 3])
+                    if m[ax + 3] - m[ax] <= t[ax + 3] - t[ax] + 1e-9:
+                        continue
+                    if not any(np.allclose(m, o) for o in new):
+                        new.append(m)
+            out.extend(new)
+            cur = new
+            if not new:
+                break
+    return np.array(out).reshape(-1, 6)
+
+
+def drop_contained(b: np.ndarray) -> np.ndarray:
+    """Boxes not contained in another (of two equal boxes the first is kept)."""
+    keep = np.ones(len(b), dtype=bool)
+    for i in range(len(b)):
+        inside = np.all(b[i, :3] >= b[:, :3] - 1e-12, axis=1) & np.all(b[i, 3:] <= b[:, 3:] + 1e-12, axis=1)
+        inside[i] = False
+        same = np.all(np.abs(b - b[i]) < 1e-12, axis=1)
+        inside &= keep & ~(same & (np.arange(len(b)) > i))
+        if inside.any():
+            keep[i] = False
+    return b[keep]

@@ -42,6 +42,9 @@ DEGREE = 7
 BOX_EPS = 1e-6          # m, control points kept this far inside their box
 LIMIT_EPS = 1e-3        # relative margin on the limits inside the QP
 BUDGET_FLOOR = 0.03     # minimum share of the squared-norm budget an axis gets
+MAX_LEG = 1.0         # m: longer polyline legs are split into several segments in their box
+MAX_SPLIT = 6           # at most this many segments per box
+MAX_SEGMENTS = 20       # split no further than this many segments in all (planning time)
 
 
 class PlanningError(RuntimeError):
@@ -255,6 +258,29 @@ def reference_polyline(route_boxes: np.ndarray, start: np.ndarray, goal: np.ndar
     return pts
 
 
+def split_long_legs(route: list[int], rboxes: np.ndarray, poly: np.ndarray, max_leg: float
+                    ) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """Split polyline legs longer than max_leg into equal segments in the same box: one degree-7
+    segment per long box cannot follow a trapezoidal speed profile inside its convex-hull
+    limits, several can (e.g. 6 m in one box: 72 s as one segment, ~52 s as four)."""
+    if not np.isfinite(max_leg) or max_leg <= 0:
+        return route, rboxes, poly
+    legs = np.linalg.norm(np.diff(poly, axis=0), axis=1)
+    k = np.clip(np.ceil(legs / max_leg).astype(int), 1, MAX_SPLIT)
+    while k.sum() > max(MAX_SEGMENTS, len(legs)):     # keep the QP small on long routes
+        max_leg *= 1.25
+        k = np.clip(np.ceil(legs / max_leg).astype(int), 1, MAX_SPLIT)
+    if np.all(k == 1):
+        return route, rboxes, poly
+    new_route, new_boxes, pts = [], [], [poly[0]]
+    for s, ks in enumerate(k):
+        for j in range(1, ks + 1):
+            pts.append(poly[s] + (poly[s + 1] - poly[s]) * j / ks)
+            new_route.append(route[s])
+            new_boxes.append(rboxes[s])
+    return new_route, np.array(new_boxes), np.array(pts)
+
+
 def initial_durations(poly: np.ndarray, v: float, a: float) -> np.ndarray:
     """Segment durations from a trapezoidal speed profile (v, a) along the polyline."""
     legs = np.linalg.norm(np.diff(poly, axis=0), axis=1)
@@ -372,7 +398,7 @@ def plan_position(start: np.ndarray, goal: np.ndarray, v_max: float, a_max: floa
                   safe: SafeSet | None = None, v0: np.ndarray | None = None,
                   v1: np.ndarray | None = None, a0: np.ndarray | None = None,
                   a1: np.ndarray | None = None, refine_rounds: int = 4,
-                  degree: int = DEGREE) -> PositionPlan:
+                  degree: int = DEGREE, max_leg: float = MAX_LEG) -> PositionPlan:
     """Time-optimal (for the limits) minimum-jerk spline from start to goal inside `safe`.
     Boundary velocity/acceleration default to rest. Raises OutsideSafeSet, NoRoute, PlanningError."""
     t_start = time.perf_counter()
@@ -388,6 +414,7 @@ def plan_position(start: np.ndarray, goal: np.ndarray, v_max: float, a_max: floa
     route = safe.route(start, goal)
     rboxes = safe.boxes[route]
     poly = reference_polyline(rboxes, start, goal)
+    route, rboxes, poly = split_long_legs(route, rboxes, poly, max_leg)
     T = initial_durations(poly, v_max, a_max)
     w = direction_budgets(poly)
     prob = _Problem(rboxes, start, goal, v0, v1, a0, a1, v_max, a_max, degree)

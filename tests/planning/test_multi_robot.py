@@ -1,33 +1,75 @@
 import numpy as np
 import pytest
 
-from astrobee import config
+from astrobee import config, flight_modes
 from astrobee import rotations as rot
 from astrobee_planning import multi_robot, planner
 
+OFF = np.array([0.4, 0.0, 0.0])
+PAIRS = [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2", "eu_lab"),
+         ("jem", "node_1")]
 
-def test_two_robots_node2_to_jem_stay_safe_and_within_limits():
-    """The paper's tight spot: two robots 0.8 m apart carry a bag through the Node 2 -> JEM hatch."""
-    off = np.array([0.4, 0.0, 0.0])
-    f = multi_robot.plan_two_robots(config.waypoint("node_2"), rot.IDENTITY, config.waypoint("jem"),
-                                    rot.IDENTITY, off, "nominal")
-    safe = planner.cached_safe_set(0.0)
-    fm = planner.flight_modes.get("nominal")
+
+def _check(f, p0, q0, p1, q1):
+    fm = flight_modes.get("nominal")
+    rs = multi_robot._robot_set(multi_robot.bx.robot_radius())
+    t = np.linspace(0.0, f.centre.trajectory.duration, 6000)
+    c = f.centre.trajectory.sample(t)
     for r in f.robots:
-        st = r.sample(np.linspace(0, r.duration, 4000))
-        assert safe.contains_all(st.pos).all()
-        assert np.linalg.norm(st.vel, axis=1).max() <= fm.hard_limit_vel
+        st = r.sample(t)
+        assert rs.contains_all(st.pos).all()                              # robot spheres
+        assert np.linalg.norm(st.vel, axis=1).max() <= fm.hard_limit_vel  # incl. w x r
         assert np.linalg.norm(st.acc, axis=1).max() <= fm.hard_limit_accel
-    # rigid formation: the robots stay 0.8 m apart, the centre midway
-    a, b = (r.sample(np.linspace(0, f.robots[0].duration, 200)) for r in f.robots)
+    assert np.linalg.norm(c.omega, axis=1).max() <= fm.hard_limit_omega
+    assert np.linalg.norm(c.alpha, axis=1).max() <= fm.hard_limit_alpha
+    # the bag box (surface points) stays in the keep-in set
+    g = np.linspace(-1, 1, 4)
+    pts = np.array([[a, b, d] for a in g for b in g for d in g]) * f.bag_half
+    bp = (np.repeat(c.pos[::10], len(pts), 0)
+          + rot.rotate(np.repeat(c.quat[::10], len(pts), 0), np.tile(pts, (len(c.pos[::10]), 1))))
+    assert multi_robot._in_region(bp).all()
+    # rigid formation: 0.8 m apart, the centre midway; ends at the requested poses at rest
+    a, b = (r.sample(t[::50]) for r in f.robots)
     np.testing.assert_allclose(np.linalg.norm(a.pos - b.pos, axis=1), 0.8, atol=1e-9)
-    c = f.centre.trajectory.sample(a.t)
-    np.testing.assert_allclose(0.5 * (a.pos + b.pos), c.pos, atol=1e-9)
-    # robot velocity is the derivative of its position
+    np.testing.assert_allclose(0.5 * (a.pos + b.pos), c.pos[::50], atol=1e-9)
+    np.testing.assert_allclose(c.pos[0], p0, atol=1e-9)
+    np.testing.assert_allclose(c.pos[-1], p1, atol=1e-9)
+    assert rot.angle_between(c.quat[0], q0) < 1e-6 and rot.angle_between(c.quat[-1], q1) < 1e-6
+    for arr in (c.vel, c.acc, c.omega):
+        assert np.abs(arr[[0, -1]]).max() < 1e-9
+    # continuity: no jumps between neighbouring samples
+    assert np.linalg.norm(np.diff(c.pos, axis=0), axis=1).max() < 0.01
+    assert np.linalg.norm(np.diff(c.vel, axis=0), axis=1).max() < 1e-3
+
+
+@pytest.mark.parametrize("a,b", PAIRS)
+def test_formation_plans_between_modules(a, b):
+    p0, p1 = config.waypoint(a), config.waypoint(b)
+    f = multi_robot.plan_two_robots(p0, rot.IDENTITY, p1, rot.IDENTITY, OFF, "nominal")
+    _check(f, p0, rot.IDENTITY, p1, rot.IDENTITY)
+    # the formation turns in line with the corridor: no turn when the path is along x
+    assert any(s.startswith("move") for s in f.steps)
+
+
+def test_formation_robot_velocity_is_derivative_of_position():
+    f = multi_robot.plan_two_robots(config.waypoint("node_2"), rot.IDENTITY, config.waypoint("jem"),
+                                    rot.IDENTITY, OFF, "nominal")
+    assert any(s.startswith("turn") for s in f.steps)
+    turn_t = 5.0    # inside the first turn: the robots move only by the rotation
     h = 1e-4
-    t = 0.5 * f.robots[0].duration
-    p = f.robots[0].sample([t - h, t + h]).pos
-    np.testing.assert_allclose((p[1] - p[0]) / (2 * h), f.robots[0].sample([t]).vel[0], atol=1e-6)
+    for r in f.robots:
+        p = r.sample([turn_t - h, turn_t + h]).pos
+        v = r.sample([turn_t]).vel[0]
+        assert np.linalg.norm(v) > 1e-3
+        np.testing.assert_allclose((p[1] - p[0]) / (2 * h), v, atol=1e-6)
+
+
+def test_formation_too_wide_for_the_hatch_fails_naming_it():
+    with pytest.raises(planner.PlanError) as exc:
+        multi_robot.plan_two_robots(config.waypoint("node_1"), rot.IDENTITY, config.waypoint("node_3"),
+                                    rot.IDENTITY, OFF, "nominal", bag_size=[0.4, 1.3, 1.3])
+    assert exc.value.code == planner.PLAN_FAILED
+    assert "hatch node_1/node_3" in str(exc.value) and "narrower" in str(exc.value)
 
 
 def test_robot_outside_keep_in_is_rejected():
@@ -35,3 +77,15 @@ def test_robot_outside_keep_in_is_rejected():
         multi_robot.plan_two_robots(config.waypoint("node_2"), rot.IDENTITY, config.waypoint("jem"),
                                     rot.IDENTITY, [3.0, 0, 0], "nominal")
     assert exc.value.code == planner.VIOLATES_KEEP_IN
+
+
+def test_bad_formation_input():
+    for kw in ({"offset": [np.nan, 0, 0]}, {"offset": OFF, "bag_size": [1, -1, 1]}):
+        with pytest.raises(planner.PlanError) as exc:
+            multi_robot.plan_two_robots(config.waypoint("node_2"), rot.IDENTITY, config.waypoint("jem"),
+                                        rot.IDENTITY, flight_mode="nominal", **kw)
+        assert exc.value.code == planner.INVALID_COMMAND
+    with pytest.raises(planner.PlanError) as exc:
+        multi_robot.plan_two_robots(config.waypoint("node_2"), rot.IDENTITY, config.waypoint("jem"),
+                                    rot.IDENTITY, OFF, "warp")
+    assert exc.value.code == planner.INVALID_FLIGHT_MODE
