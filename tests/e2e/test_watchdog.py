@@ -44,7 +44,9 @@ def test_controller_killed_watchdog_stops_thrust():
         env = testing.zenoh_env(port)
         sim = testing.spawn(testing.python_cmd(
             "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "scenario:=node2_to_jem",
-            "-p", "clock_mode:=lockstep", "-p", "lockstep_timeout:=0.2"), env)
+            "-p", "clock_mode:=lockstep", "-p", "lockstep_timeout:=0.05"), env)
+        # without a controller every tick waits lockstep_timeout: the 2 s of sim time watched
+        # after the kill (125 ticks) take ~6 s of wall time at 0.05 s (25 s at 0.2 s)
         ctl = testing.spawn(testing.python_cmd(
             "-m", "astrobee_control.pd_controller_node", "--ros-args", "-p", "use_sim_time:=true"), env)
         ctx = roszen.Context(env=env)
