@@ -11,7 +11,7 @@ import numpy as np
 
 from astrobee import config
 from astrobee import rotations as rot
-from astrobee_planning import boxes, local_planner, planner
+from astrobee_planning import boxes, local_planner, multi_robot, planner
 
 REF = {("node_2", "jem"): "1.8 s", ("jem", "node_1"): "4.3 s", ("jem", "cupola"): "10.1 s (287 s traj)"}
 
@@ -28,12 +28,24 @@ def main(argv=None) -> int:
     pairs += [p for p in others if p not in REF and p[::-1] not in REF]
     q = rot.IDENTITY
     print(f"global planner ({args.mode}, rest to rest, orientation held)")
-    print(f"{'pair':<22}{'boxes':>6}{'plan (s)':>10}{'traj (s)':>10}  pyastrobee")
+    print(f"{'pair':<22}{'segs':>6}{'plan (s)':>10}{'traj (s)':>10}  pyastrobee")
     for a, b in pairs:
         t = time.perf_counter()
         plan = planner.plan_global(wps[a], q, wps[b], q, args.mode, safe=ss)
         dt = time.perf_counter() - t
         print(f"{a + ' -> ' + b:<22}{len(plan.route):>6}{dt:>10.3f}{plan.trajectory.duration:>10.1f}  {REF.get((a, b), '-')}")
+    print("\ntwo robots + bag (0.8 m apart in line, default bag; rest to rest, bag orientation held)")
+    print(f"{'pair':<22}{'steps':>6}{'plan (s)':>10}{'traj (s)':>10}  round one")
+    before = {("node_2", "jem"): "340 s", ("node_1", "node_3"): "PLAN_FAILED"}
+    for a, b in [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2", "eu_lab"),
+                 ("jem", "node_1")]:
+        t = time.perf_counter()
+        try:
+            f = multi_robot.plan_two_robots(wps[a], q, wps[b], q, [0.4, 0.0, 0.0], args.mode)
+            res = f"{len(f.steps):>6}{time.perf_counter() - t:>10.3f}{f.centre.trajectory.duration:>10.1f}"
+        except planner.PlanError as exc:
+            res = f"{'-':>6}{time.perf_counter() - t:>10.3f}{'failed':>10}  ({exc})"
+        print(f"{a + ' -> ' + b:<22}{res}  {before.get((a, b), '-')}")
     rng = np.random.default_rng(0)
 
     def state():
