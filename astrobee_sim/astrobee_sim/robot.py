@@ -137,6 +137,7 @@ class Robot:
         self.gripper_target = 0.0
         self._set_joints_now()
         self._fit_inertia()
+        self._lim_mode = None
         self.wrench_cmd = np.zeros(6)      # body frame, after clipping
         self._com_in_base = (self.com_body - self.body_com_offset).tolist()
         self.set_pose(position, orientation)
@@ -220,10 +221,19 @@ class Robot:
 
     def twist(self) -> tuple[np.ndarray, np.ndarray]:
         """World-frame velocity of the body origin and angular velocity (world frame)."""
-        v, w = self.p.getBaseVelocity(self.id, physicsClientId=self.client)
-        v, w = np.array(v), np.array(w)
-        _, q = self.p.getBasePositionAndOrientation(self.id, physicsClientId=self.client)
-        return v - np.cross(w, qrot(q, self.body_com_offset)), w
+        return self.state()[2:]
+
+    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(pose(), twist()) from one pose and one velocity read, in plain floats (this runs
+        every tick; same arithmetic as pose() and np.cross, so bit-identical results)."""
+        p, c = self.p, self.client
+        pos, q = p.getBasePositionAndOrientation(self.id, physicsClientId=c)
+        (vx, vy, vz), w = p.getBaseVelocity(self.id, physicsClientId=c)
+        ox, oy, oz = qrot(q, self.body_com_offset).tolist()
+        wx, wy, wz = w
+        return (np.array((pos[0] - ox, pos[1] - oy, pos[2] - oz)), np.array(q),
+                np.array((vx - (wy * oz - wz * oy), vy - (wz * ox - wx * oz), vz - (wx * oy - wy * ox))),
+                np.array(w))
 
     def com(self) -> np.ndarray:
         pos, q = self.pose()
@@ -254,10 +264,22 @@ class Robot:
         return w.shape == (6,) and bool(np.all(np.isfinite(w))) and bool(np.all(np.abs(w) <= MAX_ABS_WRENCH))
 
     def command(self, wrench_body) -> bool:
-        """Set the body-frame wrench held until the next command; False (ignored) if invalid."""
-        if not self.valid(wrench_body):
+        """Set the body-frame wrench held until the next command; False (ignored) if invalid.
+
+        Same checks as valid() and clipping as clip(), on plain floats (runs every tick)."""
+        try:
+            w = np.asarray(wrench_body, dtype=float)
+        except (TypeError, ValueError):
             return False
-        self.wrench_cmd = self.clip(wrench_body)
+        if w.shape != (6,):
+            return False
+        vals = w.tolist()
+        if not all(abs(x) <= MAX_ABS_WRENCH for x in vals):     # NaN and inf fail too
+            return False
+        if self._lim_mode is not self.mode:
+            self._lim_mode = self.mode
+            self._lim = np.concatenate([self.mode.max_force, self.mode.max_torque]).tolist()
+        self._set_wrench([min(max(x, -lim), lim) for x, lim in zip(vals, self._lim)])
         return True
 
     @property
@@ -266,10 +288,13 @@ class Robot:
 
     @wrench_cmd.setter
     def wrench_cmd(self, w) -> None:
-        self._wrench = np.asarray(w, dtype=float).copy()
-        self._force = [float(x) for x in self._wrench[:3]]
-        self._torque = [float(x) for x in self._wrench[3:]]
-        self._active = bool(np.any(self._wrench))
+        self._set_wrench(np.asarray(w, dtype=float).tolist())
+
+    def _set_wrench(self, vals: list[float]) -> None:
+        self._wrench = np.array(vals, dtype=float)
+        self._force = [float(x) for x in vals[:3]]
+        self._torque = [float(x) for x in vals[3:]]
+        self._active = any(vals)
 
     def apply(self, zero: bool = False) -> None:
         """Apply the held wrench for the coming step: body frame (pybullet LINK_FRAME of the

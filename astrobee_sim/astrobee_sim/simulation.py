@@ -73,6 +73,7 @@ class Simulation:
                           "bag_resolution": bag_resolution, "robots": robots,
                           "flight_mode": flight_mode}
         self.watchdog_timeout = float(config.astrobee().get("watchdog_timeout", 0.32))
+        self._half_envelope = float(config.astrobee().get("envelope", 0.32)) / 2
         self.robots: dict[str, Robot] = {}
         self.bag: Bag | None = None
         self.reset(scenario, seed)
@@ -139,6 +140,7 @@ class Simulation:
         # nodes sink through (measured); the rigid models get the cheaper compounds
         self.wall_ids = build_pybullet(self.world, c, visuals=self.gui,
                                        per_body=1 if fem else self.wall_bodies)
+        self._wall_set = frozenset(self.wall_ids)
         rng = np.random.default_rng(seed)
         noise = float(sc.get("initial_position_noise", 0.0))
         self.robots = {}
@@ -191,20 +193,25 @@ class Simulation:
     def step(self, n: int = 1) -> None:
         """Advance n physics steps."""
         p, c = self.p, self.client
+        step_sim = p.stepSimulation
+        robots = list(self.robots.items())
+        last, fault, limit = self.last_command, self.fault, self.watchdog_timeout + 1e-9
+        bag = self.bag
         for i in range(n):
-            for name, r in self.robots.items():
-                if self.time - self.last_command[name] > self.watchdog_timeout + 1e-9:
-                    if not self.fault[name]:
-                        self.fault[name] = True
+            t = self.time
+            for name, r in robots:
+                if t - last[name] > limit:
+                    if not fault[name]:
+                        fault[name] = True
                         r.wrench_cmd = np.zeros(6)
-                elif self.fault[name]:
-                    self.fault[name] = False
+                elif fault[name]:
+                    fault[name] = False
                 r.apply()
-            p.stepSimulation(physicsClientId=c)
+            step_sim(physicsClientId=c)
             self.time += self.dt
             self.steps += 1
-            if self.bag is not None:
-                self.bag.after_step(self.dt, sample=i >= n - 2)
+            if bag is not None:
+                bag.after_step(self.dt, sample=i >= n - 2)
 
     def advance(self, duration: float) -> None:
         self.step(max(1, int(round(duration / self.dt))))
@@ -212,10 +219,7 @@ class Simulation:
     # ---- state ---------------------------------------------------------------------------
     def robot_state(self, robot: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(position, orientation [x,y,z,w], velocity, angular velocity), world frame."""
-        r = self.robots[robot]
-        pos, q = r.pose()
-        v, w = r.twist()
-        return pos, q, v, w
+        return self.robots[robot].state()
 
     def bag_state(self):
         return None if self.bag is None else self.bag.state()
@@ -223,20 +227,30 @@ class Simulation:
     def contacts(self) -> list[Contact]:
         """Contacts of the robots and the bag with the station walls.
 
-        Rigid bodies: pybullet's contact points. FEM nodes are not reported by pybullet: a node
-        within 1 cm of a wall counts, one contact (the deepest node) per tick.
+        Rigid bodies: pybullet's contact points (one unfiltered query, split per body as the
+        per-body query would: the queried body as A, normal flipped when it was B). FEM nodes
+        are not reported by pybullet: a node within 1 cm of a wall counts, one contact (the
+        deepest node) per tick.
         """
         p, c = self.p, self.client
-        walls = set(self.wall_ids)
+        walls = self._wall_set
         named = [(n or "robot", r.id) for n, r in self.robots.items()]
         fem = self.bag is not None and self.bag.model == "fem"
         if self.bag is not None and not fem:
             named += [("bag", b) for b in self.bag.body_ids]
+        per_body: dict[int, list] = {}
+        for cp in p.getContactPoints(physicsClientId=c):
+            a, b = cp[1], cp[2]
+            if b in walls:
+                per_body.setdefault(a, []).append((cp[5], cp[7], cp[9]))
+            elif a in walls:
+                n = cp[7]
+                per_body.setdefault(b, []).append((cp[6], (-n[0], -n[1], -n[2]), cp[9]))
         out = []
-        for name, body in named:
-            for cp in p.getContactPoints(bodyA=body, physicsClientId=c):
-                if cp[2] in walls:
-                    out.append(Contact(name, "iss", np.array(cp[5]), np.array(cp[7]), float(cp[9])))
+        if per_body:
+            for name, body in named:
+                for pos, normal, force in per_body.get(body, ()):
+                    out.append(Contact(name, "iss", np.array(pos), np.array(normal), float(force)))
         if fem:
             x = self.bag.points()
             d, i = self._bag_nearest()
@@ -246,9 +260,11 @@ class Simulation:
 
     def clearance(self) -> tuple[float, float]:
         """Smallest distance of the robots' envelope and of the bag to a wall (m)."""
-        half = float(config.astrobee().get("envelope", 0.32)) / 2
-        pts = np.array([r.pose()[0] for r in self.robots.values()])
-        rc = self.world.clearance(pts) - half if len(pts) else -1.0
+        if not self.robots:
+            rc = -1.0
+        else:
+            pts = np.array([r.state()[0] for r in self.robots.values()])
+            rc = self.world.clearance(pts) - self._half_envelope
         bc = self._bag_nearest()[0] if self.bag is not None else -1.0
         return rc, bc
 

@@ -95,12 +95,16 @@ class World:
 
     @staticmethod
     def _box_sdf(p: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-        """(P, B) signed distance from points to boxes (negative inside)."""
-        lo, hi = boxes[None, :, :3], boxes[None, :, 3:]
+        """(P, B) signed distance from points to boxes (negative inside).
+
+        Per axis m = max(lo - q, q - hi) (> 0 outside on that axis): outside distance
+        |max(m, 0)|, inside depth max over axes of m (= -min(q - lo, hi - q), exactly).
+        """
         q = p[:, None, :]
-        outside = np.linalg.norm(np.maximum(np.maximum(lo - q, q - hi), 0.0), axis=2)
-        inside = np.minimum(q - lo, hi - q).min(axis=2)     # >0 when the point is inside the box
-        return np.where(outside > 0, outside, -np.maximum(inside, 0.0))
+        m = np.maximum(boxes[None, :, :3] - q, q - boxes[None, :, 3:])
+        o = np.maximum(m, 0.0)
+        outside = np.sqrt(np.add.reduce(o * o, axis=2))
+        return np.where(outside > 0, outside, np.minimum(m.max(axis=2), 0.0))
 
     def _candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Slabs that can be nearest to some point of the box [lo, hi]: those whose distance to
@@ -116,15 +120,23 @@ class World:
     def _region(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Candidate slabs for points inside [lo, hi], cached per region (the box grown by
         0.5 m, reused while queries stay inside it; a few regions kept for robots and bag)."""
+        return self._region_entry(lo, hi)[2]
+
+    def _region_entry(self, lo: np.ndarray, hi: np.ndarray) -> tuple:
+        """(lo, hi, slabs, slab lows, slab highs) of the cached region holding [lo, hi]."""
         caches = self.__dict__.setdefault("_caches", [])
+        l0, l1, l2 = lo.tolist()
+        h0, h1, h2 = hi.tolist()
         for cache in caches:
-            if np.all(lo >= cache[0]) and np.all(hi <= cache[1]):
-                return cache[2]
+            (a0, a1, a2), (b0, b1, b2) = cache[0]
+            if a0 <= l0 and a1 <= l1 and a2 <= l2 and h0 <= b0 and h1 <= b1 and h2 <= b2:
+                return cache[1]
         blo, bhi = lo - 0.5, hi + 0.5
-        cache = (blo, bhi, self._candidates(blo, bhi))
-        caches.insert(0, cache)
+        cand = self._candidates(blo, bhi)
+        entry = (blo, bhi, cand, np.ascontiguousarray(cand[:, :3]), np.ascontiguousarray(cand[:, 3:]))
+        caches.insert(0, ((blo.tolist(), bhi.tolist()), entry))
         del caches[4:]
-        return cache[2]
+        return entry
 
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (m) from each point to the nearest wall slab (negative inside a wall).
@@ -143,28 +155,27 @@ class World:
         return self._box_sdf(p, cand).min(axis=1)
 
     def nearest(self, points: np.ndarray) -> tuple[float, int]:
-        """Smallest signed wall distance over a point set and the index of the point: slabs are
-        visited nearest-bound first and the search stops once no slab can do better."""
+        """Smallest signed wall distance over a point set and the index of the point (exact).
+
+        Candidate slabs of the cached region are pruned by a lower bound (distance from the
+        points' bounding box) against an upper bound (the points' distance to the slab with the
+        smallest lower bound); the survivors, usually a handful, are evaluated in one call.
+        """
         p = np.atleast_2d(np.asarray(points, dtype=float))
         lo, hi = p.min(axis=0), p.max(axis=0)
-        walls = self._region(lo, hi)
-        if len(p) * len(walls) <= 512:             # small query: evaluate every candidate
-            d = self._box_sdf(p, walls).min(axis=1)
-            i = int(d.argmin())
-            return float(d[i]), i
-        gap = np.maximum(np.maximum(walls[:, :3] - hi, lo - walls[:, 3:]), 0.0)
-        lb = np.linalg.norm(gap, axis=1)
-        order = np.argsort(lb, kind="stable")
-        best, arg = np.inf, 0
-        for start in range(0, len(order), 4):
-            idx = order[start:start + 4]
-            if lb[idx[0]] > max(best, 0.0):
-                break
-            d = self._box_sdf(p, walls[idx]).min(axis=1)
-            i = int(d.argmin())
-            if d[i] < best:
-                best, arg = float(d[i]), i
-        return best, arg
+        _, _, walls, w_lo, w_hi = self._region_entry(lo, hi)
+        if len(p) * len(walls) > 256:      # tiny queries: evaluating every candidate is cheaper
+            gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
+            lb = np.einsum("ij,ij->i", gap, gap)                      # squared lower bounds
+            k = int(lb.argmin())
+            ub = float(self._box_sdf(p, walls[k:k + 1]).min())
+            if ub > 0:
+                walls = walls[lb <= ub * ub * (1 + 1e-9) + 1e-18]
+            else:
+                walls = walls[lb <= 0.0]
+        d = self._box_sdf(p, walls).min(axis=1)
+        i = int(d.argmin())
+        return float(d[i]), i
 
     def clearance(self, points: np.ndarray) -> float:
         """Smallest signed wall distance over a set of points (e.g. a bag's nodes)."""

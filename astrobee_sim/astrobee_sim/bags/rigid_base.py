@@ -28,6 +28,20 @@ def to_frame(pos, orn, world_point) -> list[float]:
     return rot.rotate_inverse(np.asarray(orn), np.asarray(world_point) - np.asarray(pos)).tolist()
 
 
+def quat_matrices(Q: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 4) quaternions [x,y,z,w] (Bullet's formula, vectorised:
+    one call instead of a getMatrixFromQuaternion per part)."""
+    x, y, z, w = Q[:, 0], Q[:, 1], Q[:, 2], Q[:, 3]
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    xs, ys, zs = x * s, y * s, z * s
+    wx, wy, wz = w * xs, w * ys, w * zs
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    return np.stack([1.0 - (yy + zz), xy - wz, xz + wy,
+                     xy + wz, 1.0 - (xx + zz), yz - wx,
+                     xz - wy, yz + wx, 1.0 - (xx + yy)], axis=1).reshape(-1, 3, 3)
+
+
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
@@ -39,6 +53,13 @@ class RigidPartsBag(Bag):
     def __init__(self, *a, **kw):
         super().__init__(*a, **kw)
         self.constraints: list[int] = []
+        self._local_corners = None
+        self._invalidate()
+
+    def _invalidate(self) -> None:
+        """The part poses changed (stepped, set, restored): drop the per-step reads."""
+        self._memo = None
+        self._corners = None
 
     @property
     def body_ids(self) -> list[int]:
@@ -51,6 +72,7 @@ class RigidPartsBag(Bag):
                 b, (np.asarray(position) + rot.rotate(q, off)).tolist(), q.tolist(),
                 physicsClientId=self.client)
             self.p.resetBaseVelocity(b, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        self._invalidate()
 
     def part_for_handle(self, k: int) -> int:
         """Index of the part holding handle k (nearest the handle point)."""
@@ -76,22 +98,32 @@ class RigidPartsBag(Bag):
             self.p.removeConstraint(cid, physicsClientId=self.client)
         self.constraints = []
         self.attached = [False] * len(self.handles)
+        self._invalidate()
 
     def _poses(self):
-        P, Q, V, W = [], [], [], []
-        for b in self.parts:
-            pos, q = self.p.getBasePositionAndOrientation(b, physicsClientId=self.client)
-            v, w = self.p.getBaseVelocity(b, physicsClientId=self.client)
-            P.append(pos); Q.append(q); V.append(v); W.append(w)
-        return np.array(P), np.array(Q), np.array(V), np.array(W)
+        """(P, Q, V, W) of the parts, read once per physics step (state() and points() share it)."""
+        if self._memo is None:
+            p, c = self.p, self.client
+            pose, vel = p.getBasePositionAndOrientation, p.getBaseVelocity
+            P, Q, V, W = [], [], [], []
+            for b in self.parts:
+                pos, q = pose(b, physicsClientId=c)
+                v, w = vel(b, physicsClientId=c)
+                P.append(pos); Q.append(q); V.append(v); W.append(w)
+            self._memo = (np.array(P), np.array(Q), np.array(V), np.array(W))
+        return self._memo
+
+    def after_step(self, dt: float, sample: bool = True) -> None:
+        self._invalidate()
 
     def state(self) -> BagState:
         P, Q, V, W = self._poses()
         if len(self.parts) == 1:
             q = Q[0]
-            return BagState(P[0] - qrot(q, self.offsets[0]), q, V[0], W[0], 0.0, list(self.attached))
+            return BagState(P[0] - qrot(q, self.offsets[0]), q.copy(), V[0].copy(), W[0].copy(),
+                            0.0, list(self.attached))
         q, c = kabsch(self.offsets, P)
-        R = np.array(self.p.getMatrixFromQuaternion(q.tolist())).reshape(3, 3)
+        R = quat_matrices(q[None])[0]
         mean_off = self.offsets.mean(axis=0)
         pos = c - R @ mean_off
         v = V.mean(axis=0)
@@ -106,16 +138,17 @@ class RigidPartsBag(Bag):
 
     def points(self) -> np.ndarray:
         """Corners of every part."""
-        p, c = self.p, self.client
-        out = []
-        for b, half in zip(self.parts, self.half_extents):
-            pos, q = p.getBasePositionAndOrientation(b, physicsClientId=c)
-            R = np.array(p.getMatrixFromQuaternion(q)).reshape(3, 3)
-            out.append(np.asarray(pos) + (_CORNERS * half) @ R.T)
-        return np.concatenate(out)
+        if self._corners is None:
+            P, Q = self._poses()[:2]
+            if self._local_corners is None:
+                self._local_corners = np.array([_CORNERS * h for h in self.half_extents])
+            R = quat_matrices(Q)                                   # (n, 3, 3)
+            self._corners = (P[:, None, :] + np.einsum("nkj,nij->nki", self._local_corners, R)
+                             ).reshape(-1, 3)
+        return self._corners
 
     def snapshot(self):
         return None   # rigid parts are covered by the simulation's saveState
 
     def restore(self, snap) -> None:
-        pass
+        self._invalidate()      # the caller's restoreState moved the parts
