@@ -191,7 +191,7 @@ def test_controller_killed_midflight(tmp_path, config_dir, launches):
     # lockstep_timeout: without a controller the sim steps on every 0.05 s (default 1 s)
     launch = Launch(run, config_dir, "scenario:=short_hop", "lockstep_timeout:=0.05")
     launches.append(launch)
-    launch.read_until(r"CONTROLLING t=", timeout=120.0)
+    launch.read_until(r"CONTROLLING: segment", timeout=120.0)   # the controller took it
     pids = launch.child_pids()
     os.killpg(pids["pd_controller_node"], signal.SIGKILL)
     code = launch.wait(timeout=60.0)
@@ -224,7 +224,7 @@ def test_sigint_leaves_nothing_behind(tmp_path, config_dir, launches):
     run = tmp_path / "run"
     launch = Launch(run, config_dir, "scenario:=short_hop")
     launches.append(launch)
-    launch.read_until(r"CONTROLLING t=", timeout=120.0)
+    launch.read_until(r"CONTROLLING: segment", timeout=120.0)   # the controller took it
     pids = launch.child_pids()
     assert {"sim_node", "planner_node", "pd_controller_node", "recorder", "mission"} <= set(pids)
     os.kill(launch.proc.pid, signal.SIGINT)
