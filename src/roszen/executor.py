@@ -1,6 +1,13 @@
-"""Single-threaded executor: zenoh threads enqueue work, spin()/spin_once() run callbacks."""
+"""Single-threaded executor: zenoh threads enqueue work, spin()/spin_once() run callbacks.
+
+Hand-off protocol (cheap for the zenoh threads): a producer appends its item to the entity's
+deque and, when the entity is not yet scheduled, the entity to the executor's ready deque; it
+pokes the wake-up queue only when the executor said it is idle (one wake-up per batch, not per
+message). Both deques are thread-safe for append/popleft.
+"""
 from __future__ import annotations
 
+import collections
 import queue
 import threading
 import time
@@ -11,7 +18,9 @@ class Executor:
     """Runs the callbacks of its nodes one at a time on the spinning thread."""
 
     def __init__(self) -> None:
-        self._ready: "queue.SimpleQueue" = queue.SimpleQueue()
+        self._ready: collections.deque = collections.deque()
+        self._wakeq: "queue.SimpleQueue" = queue.SimpleQueue()
+        self._idle = False
         self._nodes: list = []
         self._spin_lock = threading.Lock()
         self._shutdown = False
@@ -20,15 +29,20 @@ class Executor:
     def schedule(self, ent) -> None:
         """Mark an entity with pending work; it is queued once until its buffer is drained.
 
-        Lock-free: a lost wake-up is impossible because the executor re-checks the buffer after
-        clearing the flag; a duplicate entry in the ready queue is harmless (it finds no work).
+        Lock-free: no wake-up is lost because the executor publishes `_idle` before re-checking
+        the ready deque, and a producer reads `_idle` after appending; a spurious wake-up is
+        harmless (the executor finds no work and waits again).
         """
         if not ent._scheduled:
             ent._scheduled = True
-            self._ready.put(ent)
+            self._ready.append(ent)
+            if self._idle:
+                self._idle = False
+                self._wakeq.put(None)
 
     def wake(self) -> None:
-        self._ready.put(None)
+        """Interrupt a wait (timers changed, node destroyed, shutdown)."""
+        self._wakeq.put(None)
 
     # -- nodes --------------------------------------------------------------------------------
     def add_node(self, node) -> bool:
@@ -59,8 +73,11 @@ class Executor:
 
     # -- running ------------------------------------------------------------------------------
     def _timers(self) -> list:
+        nodes = self._nodes
+        if len(nodes) == 1:
+            return nodes[0]._timers
         out = []
-        for n in self._nodes:
+        for n in nodes:
             out.extend(n._timers)
         return out
 
@@ -80,58 +97,63 @@ class Executor:
                 best = w
         return best
 
+    def _wait(self, timeout: Optional[float]) -> None:
+        """Block until work is scheduled, wake() is called or `timeout` (None: forever) passes."""
+        self._idle = True
+        if self._ready:  # scheduled between the caller's check and `_idle` being seen
+            self._idle = False
+            return
+        try:
+            if timeout is None:
+                self._wakeq.get()
+            elif timeout > 0:
+                self._wakeq.get(timeout=timeout)
+        except queue.Empty:
+            pass
+        self._idle = False
+
+    def _next_entity(self, timeout: Optional[float]):
+        """The next ready entity, waiting up to `timeout` (capped by wall timers); None if none."""
+        ready = self._ready
+        if not ready:
+            tw = self._wait_for_timers()
+            if tw is not None:
+                timeout = tw if timeout is None else min(timeout, tw)
+            if timeout is not None and timeout <= 0:
+                return None
+            self._wait(timeout)
+            if not ready:
+                return None
+        return ready.popleft()
+
     def spin_once(self, timeout_sec: Optional[float] = None) -> bool:
         """Run at most one callback; wait up to timeout_sec (None = forever) for work."""
         with self._spin_lock:
             if self._run_due_timer():
                 return True
-            wait = timeout_sec
-            tw = self._wait_for_timers()
-            if tw is not None:
-                wait = tw if wait is None else min(wait, tw)
-            try:
-                if wait is None:
-                    ent = self._ready.get()
-                elif wait <= 0:
-                    ent = self._ready.get_nowait()
-                else:
-                    ent = self._ready.get(timeout=wait)
-            except queue.Empty:
-                return self._run_due_timer()
+            ent = self._next_entity(timeout_sec)
             if ent is None:
                 return self._run_due_timer()
             return self._run_entity(ent, 1)
 
     def _run_entity(self, ent, batch: int) -> bool:
         """Run up to `batch` pending items of one entity, then requeue it if work is left."""
-        ran = False
-        for _ in range(batch):
-            item = ent._pop()
-            if item is None:
-                ent._scheduled = False
-                if ent._has_work():  # raced with a producer: take it back
-                    ent._scheduled = True
-                    self._ready.put(ent)
-                return ran
-            ent._execute(item)
-            ran = True
-        self._ready.put(ent)  # more may be pending: go to the back of the line (fairness)
+        ran = ent._run(batch)
+        if ent._has_work():
+            self._ready.append(ent)  # more pending: go to the back of the line (fairness)
+        else:
+            ent._scheduled = False
+            if ent._has_work():  # raced with a producer that saw the flag still set: take it back
+                ent._scheduled = True
+                self._ready.append(ent)
         return ran
 
-    def _spin_some(self, timeout_sec: float, batch: int = 32) -> None:
+    def _spin_some(self, timeout_sec: float, batch: int = 64) -> None:
         """spin()'s step: like spin_once but drains up to `batch` items of one entity."""
         with self._spin_lock:
             if self._run_due_timer():
                 return
-            wait = timeout_sec
-            tw = self._wait_for_timers()
-            if tw is not None:
-                wait = min(wait, tw)
-            try:
-                ent = self._ready.get(timeout=wait) if wait > 0 else self._ready.get_nowait()
-            except queue.Empty:
-                self._run_due_timer()
-                return
+            ent = self._next_entity(timeout_sec)
             if ent is None:
                 self._run_due_timer()
                 return

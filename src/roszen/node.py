@@ -41,14 +41,19 @@ class _Entity:
     """Something the executor can run: a buffer of pending items and a handler."""
     _scheduled = False
 
-    def _pop(self):
-        try:
-            return self._buf.popleft()
-        except IndexError:
-            return None
-
     def _has_work(self) -> bool:
         return bool(self._buf)
+
+    def _run(self, batch: int) -> bool:
+        """Handle up to `batch` buffered items on the executor thread; True if any ran."""
+        popleft, execute = self._buf.popleft, self._execute
+        for i in range(batch):
+            try:
+                item = popleft()
+            except IndexError:
+                return i > 0
+            execute(item)
+        return True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -118,6 +123,7 @@ class Subscription(_Entity):
         self.callback = callback
         self.raw = raw
         self._direct = direct
+        self._deserialize = self._sup.deserialize
         self._buf: collections.deque = collections.deque(maxlen=None if qos.keep_all else qos.effective_depth)
         self._warned_no_att = False
         self._bad_sources: set = set()
@@ -128,41 +134,49 @@ class Subscription(_Entity):
                                          node.namespace, node.name, self.topic_name, self._sup.dds_name,
                                          self._sup.type_hash, qos)
         self.gid = wire.gid_of(self.token)
+        # indirect: zenoh's network thread only hands the sample to a zenoh-python thread, so it
+        # never waits for the GIL while the executor decodes (x2 msgs/s measured, same latency)
+        on_sample = (_callback(self._on_sample_direct) if direct
+                     else zenoh.handlers.Callback(self._on_sample, indirect=True))
         if qos.transient_local:
             self._sub = zext.declare_advanced_subscriber(
-                ctx.session, self.key_expr, _callback(self._on_sample),
+                ctx.session, self.key_expr, on_sample,
                 history=zext.HistoryConfig(detect_late_publishers=True, max_samples=qos.effective_depth),
                 recovery=zext.RecoveryConfig(periodic_queries=None, heartbeat=True) if qos.reliable else None,
                 subscriber_detection=True)
         else:
-            self._sub = ctx.session.declare_subscriber(self.key_expr, _callback(self._on_sample))
+            self._sub = ctx.session.declare_subscriber(self.key_expr, on_sample)
         self._token = ctx.session.liveliness().declare_token(self.token)
         ctx.graph.add(self.token)
 
-    def _on_sample(self, sample: "zenoh.Sample") -> None:  # zenoh thread
+    def _on_sample(self, sample: "zenoh.Sample") -> None:  # zenoh thread: the minimum
+        self._buf.append(sample)
+        if not self._scheduled:
+            self.node._executor.schedule(self)
+
+    def _on_sample_direct(self, sample: "zenoh.Sample") -> None:  # zenoh thread (/clock only)
+        self._execute(sample)
+        self.node._executor.wake()
+
+    def _no_attachment(self) -> None:
+        if not self._warned_no_att:
+            self._warned_no_att = True
+            self.node.get_logger().warn(
+                f"dropping sample on {self.topic_name} without the rmw_zenoh attachment "
+                f"(as rmw_zenoh does); further ones are dropped silently")
+
+    def _execute(self, sample: "zenoh.Sample") -> None:
+        """Decode one sample and run the callback (executor thread; zenoh thread for /clock)."""
         att = sample.attachment
         if att is None:
-            if not self._warned_no_att:
-                self._warned_no_att = True
-                self.node.get_logger().warn(
-                    f"dropping sample on {self.topic_name} without the rmw_zenoh attachment "
-                    f"(as rmw_zenoh does); further ones are dropped silently")
+            self._no_attachment()
             return
-        item = (sample.payload, att)
-        if self._direct:
-            self._execute(item)
-            self.node._executor.wake()
-            return
-        self._buf.append(item)
-        self.node._executor.schedule(self)
-
-    def _execute(self, item) -> None:
-        data, att = item[0].to_bytes(), item[1]
+        data = sample.payload.to_bytes()
         if self.raw:
             msg = data
         else:
             try:
-                msg = self._sup.deserialize(data)
+                msg = self._deserialize(data)
             except Exception as e:
                 self._report_bad(att, f"malformed CDR payload ({len(data)} bytes) for {self.msg_type}: {e}")
                 return
@@ -216,7 +230,8 @@ class Service(_Entity):
 
     def _on_query(self, query: "zenoh.Query") -> None:  # zenoh thread
         self._buf.append(query)
-        self.node._executor.schedule(self)
+        if not self._scheduled:
+            self.node._executor.schedule(self)
 
     def _fail(self, query, reason: str) -> None:
         self.node.get_logger().error(f"service {self.service_name}: {reason}")
