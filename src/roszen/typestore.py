@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 import threading
 from pathlib import Path
 from typing import Any, Callable
@@ -15,7 +16,8 @@ from typing import Any, Callable
 from .types import convert as _convert
 from .types import rihs as _rihs
 from .types.cdr import CdrBackend, MessageDecodeError, MessageEncodeError, make_checker
-from .types.classes import make_class
+from .types.cdrgen import make_serializer as make_fast_serializer
+from .types.classes import DTYPES, make_class
 from .types.spec import InterfaceParseError, MsgSpec, SrvSpec, parse_msg, parse_srv
 from .types.spec import Constant, Field, FieldType
 
@@ -305,7 +307,10 @@ def _make_serializer(name: str) -> Callable[[Any], bytes]:
         fn = _serializers.get(full)
         if fn is None:
             checker = make_checker(get_spec(full), get_spec, _checkers)
-            fn = _get_backend().serializer(full, _convert.coerce, checker)
+            fast = None
+            if sys.byteorder == "little":  # the generated code copies numpy buffers as they are
+                fast = make_fast_serializer(get_spec(full), get_spec, DTYPES)
+            fn = _get_backend().serializer(full, _convert.coerce, checker, fast)
             _serializers[full] = fn
         _serializers[name] = fn
         return fn

@@ -54,13 +54,19 @@ class CdrBackend:
         self.classes[spec.name] = cls
 
     def serializer(self, name: str, coerce: Callable[[object], object],
-                   checker: Callable[[object], bool] | None) -> Callable[[object], bytes]:
+                   checker: Callable[[object], bool] | None,
+                   fast: Callable[[object], bytes] | None = None) -> Callable[[object], bytes]:
+        """Encoder for `name`: `fast` (generated, checks inline) or rosbags' code after `checker`.
+
+        A message the fast path refuses goes once through `coerce` (the validating converter):
+        convertible values are sent, anything else raises MessageEncodeError naming the field.
+        """
         store = self.store
         msgdef = store.get_msgdef(name)
         getsize, ser, cls = msgdef.getsize_cdr, msgdef.serialize_cdr_le, self.classes[name]
 
-        def serialize(msg: object) -> bytes:
-            try:
+        if fast is None:
+            def fast(msg: object) -> bytes:
                 if checker is not None and not checker(msg):
                     raise TypeError("field values need conversion")
                 size = getsize(0, msg, store)
@@ -68,17 +74,16 @@ class CdrBackend:
                 buf[1] = 1
                 ser(memoryview(buf)[4:], 0, msg, store)
                 return bytes(buf)
+
+        def serialize(msg: object) -> bytes:
+            try:
+                return fast(msg)
             except Exception as exc:  # noqa: BLE001 - retried once with coerced field values
                 if not isinstance(msg, cls):
                     raise MessageEncodeError(
                         f"cannot serialize {type(msg).__name__} as {name}") from exc
                 try:
-                    fixed = coerce(msg)
-                    size = getsize(0, fixed, store)
-                    buf = bytearray(size + 4)
-                    buf[1] = 1
-                    ser(memoryview(buf)[4:], 0, fixed, store)
-                    return bytes(buf)
+                    return fast(coerce(msg))
                 except MessageEncodeError:
                     raise
                 except Exception as exc2:  # noqa: BLE001
