@@ -79,13 +79,20 @@ def msg_support(name: str) -> MsgSupport:
 
 
 def _serializer(ts, name: str) -> Callable[[Any], bytes]:
-    fn = ts.serialize
-    return lambda msg: fn(msg, name)
+    """The typestore's encoder itself (no per-call name lookup); lazy if it cannot be built yet."""
+    try:
+        return ts.serializer(name)
+    except Exception:  # noqa: BLE001 - reported with context on first use
+        fn = ts.serialize
+        return lambda msg: fn(msg, name)
 
 
 def _deserializer(ts, name: str) -> Callable[[bytes], Any]:
-    fn = ts.deserialize
-    return lambda data: fn(data, name)
+    try:
+        return ts.deserializer(name)
+    except Exception:  # noqa: BLE001
+        fn = ts.deserialize
+        return lambda data: fn(data, name)
 
 
 def srv_support(name: str) -> SrvSupport:

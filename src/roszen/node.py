@@ -86,16 +86,20 @@ class Publisher:
             self._pub = ctx.session.declare_publisher(self.key_expr, congestion_control=cc, reliability=rel)
         self._token = ctx.session.liveliness().declare_token(self.token)
         node.context.graph.add(self.token)
+        self._cls, self._serialize, self._put = self._sup.cls, self._sup.serialize, self._pub.put
+        self._attachment = wire.attachment_maker(self.gid)
 
     def publish(self, msg: Any) -> None:
         """Serialise and send; bytes are sent as an already serialised CDR payload."""
-        if isinstance(msg, (bytes, bytearray, memoryview)):
+        if type(msg) is self._cls:
+            data = self._serialize(msg)
+        elif isinstance(msg, (bytes, bytearray, memoryview)):
             data = bytes(msg)
+        elif isinstance(msg, self._cls):
+            data = self._serialize(msg)
         else:
-            if not isinstance(msg, self._sup.cls):
-                raise TypeError(f"publisher on {self.topic_name} expects {self.msg_type}, got {type(msg).__name__}")
-            data = self._sup.serialize(msg)
-        self._pub.put(data, attachment=wire.make_attachment(next(self._seq), self.gid))
+            raise TypeError(f"publisher on {self.topic_name} expects {self.msg_type}, got {type(msg).__name__}")
+        self._put(data, attachment=self._attachment(next(self._seq)))
 
     def get_subscription_count(self) -> int:
         return self.node.context.graph.count_subscribers(self.topic_name)

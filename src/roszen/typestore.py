@@ -24,7 +24,7 @@ from .types.spec import Constant, Field, FieldType
 __all__ = [
     "MessageDecodeError", "MessageEncodeError", "UnknownTypeError", "InterfaceParseError",
     "register_interface_path", "message_class", "request_class", "response_class",
-    "serialize", "deserialize", "type_hash", "dds_type_name", "message_definition",
+    "serialize", "deserialize", "serializer", "deserializer", "type_hash", "dds_type_name", "message_definition",
     "to_dict", "from_dict", "to_yaml", "list_types", "is_service", "definition_text",
     "normalize_type_name", "get_spec", "get_service_spec",
 ]
@@ -299,6 +299,18 @@ def serialize(msg: Any, name: str) -> bytes:
     if fn is None:
         fn = _make_serializer(name)
     return fn(msg)
+
+
+def serializer(name: str) -> Callable[[Any], bytes]:
+    """The cached encoder `fn(msg) -> bytes` of type `name` (what `serialize` calls)."""
+    fn = _serializers.get(name)
+    return fn if fn is not None else _make_serializer(name)
+
+
+def deserializer(name: str) -> Callable[[Any], Any]:
+    """The cached decoder `fn(data) -> msg` of type `name` (what `deserialize` calls)."""
+    fn = _deserializers.get(name)
+    return fn if fn is not None else _make_deserializer(name)
 
 
 def _make_serializer(name: str) -> Callable[[Any], bytes]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import struct
 import time
 from dataclasses import dataclass
-from typing import Optional
+from typing import Callable, Optional
 
 import xxhash
 
@@ -44,6 +44,17 @@ def endpoint_token(domain_id: int, zid: str, nid: int, eid: int, kind: str, encl
 def gid_of(token: str) -> bytes:
     """GID: XXH3-128 of the token string, low 64 bits LE then high 64 bits LE."""
     return xxhash.xxh3_128_intdigest(token.encode()).to_bytes(16, "little")
+
+
+_ATT_HEAD = struct.Struct("<qq")
+
+
+def attachment_maker(gid: bytes) -> "Callable[[int], bytes]":
+    """`f(seq)`: the attachment of one publisher (GID part built once, timestamp = now)."""
+    if len(gid) != 16:
+        raise ValueError(f"GID must be 16 bytes, got {len(gid)}")
+    tail, head, now = b"\x10" + bytes(gid), _ATT_HEAD.pack, time.time_ns
+    return lambda seq: head(seq, now()) + tail
 
 
 def make_attachment(seq: int, gid: bytes, timestamp_ns: Optional[int] = None) -> bytes:
