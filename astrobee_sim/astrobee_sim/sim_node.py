@@ -70,6 +70,8 @@ class SimNode:
         self.mesh_rate = float(par("mesh_rate", 10.0))
         self.lockstep_timeout = float(par("lockstep_timeout", 1.0))
         self.lockstep_start_timeout = float(par("lockstep_start_timeout", 30.0))
+        # commands stamped further than this ahead of sim time are dropped (stale, pre-reset)
+        self.command_max_lead_ns = int(float(par("command_max_lead", 0.5)) * 1e9)
         seed = int(par("seed", 0))
         gui = bool(par("gui", False))
         drag = bool(par("drag", False))
@@ -155,12 +157,23 @@ class SimNode:
             return
         if name not in self.sim.robots:
             return
+        now = self.now_ns()
+        if stamp > now + self.command_max_lead_ns:
+            # after a reset sim time restarts at 0: a command answering a state from before the
+            # reset carries a stamp ahead of the new sim time; it would also let lockstep skip
+            # its waits up to that stamp
+            self._warn("ahead", f"command for robot {name!r} stamped {stamp / 1e9:.3f} s, more than "
+                       f"{self.command_max_lead_ns / 1e9:g} s ahead of sim time {now / 1e9:.3f} s "
+                       f"(from before a reset?): dropped")
+            return
         if not self.sim.command(wrench, name):
             self._warn("rejected", f"command rejected for robot {name!r} (non-finite or > 100 N/Nm): "
                        f"{np.array2string(wrench, precision=3)}")
             return
         io = self.robot_io[name]
-        io["cmd_stamp"] = max(io["cmd_stamp"], stamp)
+        # a command never answers a tick the sim has not reached: lockstep counts it for the
+        # current tick at most (a slightly-ahead stamp must not let later ticks run unanswered)
+        io["cmd_stamp"] = max(io["cmd_stamp"], min(stamp, now))
 
     def _on_set_mode(self, req: Any, robot: str | None) -> Any:
         resp = self.roszen.response_class("astrobee_msgs/srv/SetFlightMode")()
@@ -225,44 +238,68 @@ class SimNode:
     def now_ns(self) -> int:
         return int(round(self.sim.time * 1e9))
 
+    def _robot_msgs(self, name: str) -> dict:
+        """The per-tick messages of one robot, built once (publish() serialises at once, so
+        mutating them afterwards is safe); headers, poses and rotations are shared objects."""
+        M = self.M
+        ps = M["pose"]()
+        ps.header.frame_id = "world"
+        tw = M["twist"]()
+        tw.header = ps.header
+        ekf = M["ekf"]()
+        ekf.header = ps.header
+        ekf.child_frame_id = f"{name}/body" if name else "body"
+        ekf.pose = ps.pose
+        ekf.confidence = 0
+        ts = M["tfs"]()
+        ts.header = ps.header
+        ts.child_frame_id = ekf.child_frame_id
+        ts.transform.rotation = ps.pose.orientation
+        return {"pose": ps, "twist": tw, "ekf": ekf, "tfs": ts}
+
+    def _global_msgs(self) -> dict:
+        M = self.M
+        bs = M["bag"]()
+        bs.header.frame_id = "world"
+        bts = M["tfs"]()
+        bts.header = bs.header
+        bts.child_frame_id = "bag"
+        bts.transform.rotation = bs.pose.orientation
+        cs = M["contacts"]()
+        cs.header.frame_id = "world"
+        return {"clock": M["clock"](), "tf": M["tf"](), "bag": bs, "bag_tfs": bts, "contacts": cs}
+
     def publish_state(self) -> None:
-        M, t = self.M, self.now_ns()
-        clk = M["clock"]()
+        t = self.now_ns()
+        g = self.__dict__.get("_msgs")
+        if g is None:
+            g = self._msgs = self._global_msgs()
+        clk = g["clock"]
         _stamp(clk.clock, t)
         self.pub_clock.publish(clk)
-        tf = M["tf"]()
         transforms = []
         for name, r in self.sim.robots.items():
             io = self.robot_io[name]
+            msgs = io.get("msgs")
+            if msgs is None:
+                msgs = io["msgs"] = self._robot_msgs(name)
             pos, q, v, w = self.sim.robot_state(name)
-            ps = M["pose"]()
-            _stamp(ps.header.stamp, t)
-            ps.header.frame_id = "world"
-            _pose(ps.pose, pos, q)
+            ps, tw, ekf, ts = msgs["pose"], msgs["twist"], msgs["ekf"], msgs["tfs"]
+            _stamp(ps.header.stamp, t)               # shared by twist, ekf and tf
+            _pose(ps.pose, pos, q)                   # shared by ekf (and its rotation by tf)
             io["pose"].publish(ps)
-            tw = M["twist"]()
-            tw.header = ps.header
             _vec(tw.twist.linear, v)
             _vec(tw.twist.angular, w)
             io["twist"].publish(tw)
-            ekf = M["ekf"]()
-            ekf.header = ps.header
-            ekf.child_frame_id = f"{name}/body" if name else "body"
-            ekf.pose = ps.pose
             _vec(ekf.velocity, v)
             _vec(ekf.omega, qrot((-q[0], -q[1], -q[2], q[3]), w))      # world -> body
-            ekf.confidence = 0
             io["ekf"].publish(ekf)
-            ts = M["tfs"]()
-            ts.header = ps.header
-            ts.child_frame_id = ekf.child_frame_id
             _vec(ts.transform.translation, pos)
-            ts.transform.rotation = ps.pose.orientation
             transforms.append(ts)
             fault = self.sim.fault[name]
             if fault != io["fault_state"]:
                 io["fault_state"] = fault
-                f = M["fault"]()
+                f = self.M["fault"]()
                 f.header = ps.header
                 f.source = "sim/propulsion_watchdog"
                 f.code = FAULT_WATCHDOG
@@ -274,9 +311,8 @@ class SimNode:
         rc, bc = self.sim.clearance()
         if bag is not None:
             st = bag.state()
-            bs = M["bag"]()
+            bs, bts = g["bag"], g["bag_tfs"]
             _stamp(bs.header.stamp, t)
-            bs.header.frame_id = "world"
             bs.model, bs.variant = bag.model, bag.variant
             _pose(bs.pose, st.position, st.orientation)
             _vec(bs.velocity, st.velocity)
@@ -284,28 +320,24 @@ class SimNode:
             bs.deformation = float(st.deformation)
             bs.attached = np.array(st.attached, dtype=bool)
             self.pub_bag.publish(bs)
-            ts = M["tfs"]()
-            ts.header = bs.header
-            ts.child_frame_id = "bag"
-            _vec(ts.transform.translation, st.position)
-            ts.transform.rotation = bs.pose.orientation
-            transforms.append(ts)
+            _vec(bts.transform.translation, st.position)
+            transforms.append(bts)
             if self.sim.time - self._last_mesh >= 1.0 / self.mesh_rate - 1e-9:
                 self._last_mesh = self.sim.time
                 pts = bag.points()
-                mm = M["mesh"]()
+                mm = self.M["mesh"]()
                 mm.header = bs.header
                 mm.num_nodes = len(pts)
                 mm.positions = np.asarray(pts, np.float32).reshape(-1)
                 self.pub_mesh.publish(mm)
+        tf = g["tf"]
         tf.transforms = transforms
         self.pub_tf.publish(tf)
-        cs = M["contacts"]()
+        cs = g["contacts"]
         _stamp(cs.header.stamp, t)
-        cs.header.frame_id = "world"
         lst = []
         for c in self.sim.contacts():
-            m = M["contact"]()
+            m = self.M["contact"]()
             m.body_a, m.body_b = c.body_a, c.body_b
             _vec(m.position, c.position)
             _vec(m.normal, c.normal)

@@ -234,3 +234,38 @@ def test_two_robots_each_under_its_namespace(graph):
     g.node.create_subscription("astrobee_msgs/msg/FlightMode", "/bumble/mob/flight_mode",
                                modes.append, roszen.LATCHED)
     assert g.spin_until(lambda: any(m.name == "quiet" for m in modes), 10.0)
+
+
+def test_lockstep_drops_commands_from_before_a_reset(graph):
+    """A command answering a pre-reset state must not let lockstep run ahead unanswered."""
+    g = graph("scenario:=node2_to_jem", "clock_mode:=lockstep", "lockstep_timeout:=30.0")
+    pub = g.node.create_publisher("astrobee_msgs/msg/FamCommand", "/gnc/ctl/command", 10)
+    answering = [True]
+    stamps = []
+
+    def on_ekf(m):
+        t = m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+        stamps.append(t)
+        if answering[0]:
+            _publish_wrench(g, pub, [0.1, 0, 0, 0, 0, 0], t)
+    g.node.create_subscription("astrobee_msgs/msg/EkfState", "/gnc/ekf", on_ekf, 50)
+    assert g.spin_until(lambda: stamps and stamps[-1] >= 700_000_000, 60.0)
+    answering[0] = False
+    stale = stamps[-1]                                     # ~0.7 s: a state from before the reset
+    r = g.call("astrobee_msgs/srv/Reset", "/sim/reset", scenario="", seed=0)
+    assert r.success
+    stamps.clear()
+    for stale_ns in (stale, 300_000_000):                  # far ahead (dropped), slightly ahead
+        for _ in range(3):
+            _publish_wrench(g, pub, [0.1, 0, 0, 0, 0, 0], stale_ns)
+            g.spin_until(lambda: False, 0.05)
+    g.spin_until(lambda: False, 1.5)
+    # the sim may take one tick on the slightly-ahead command, never run on to its stamp
+    assert stamps and max(stamps) < 20_000_000, max(stamps)      # at most one tick (17.1 ms)
+    # answering again, it steps on
+    answering[0] = True
+    _publish_wrench(g, pub, [0.1, 0, 0, 0, 0, 0], max(stamps))
+    assert g.spin_until(lambda: max(stamps) >= 100_000_000, 30.0)
+    g.sim.terminate()
+    out, err = g.sim.communicate(timeout=10)
+    assert "ahead of sim time" in out + err
