@@ -37,8 +37,8 @@ class CompositeBag(RigidPartsBag):
 
     def _tie(self) -> None:
         """Ties between face neighbours: one fixed constraint each (`tie: fixed`: measured no
-        cheaper), or four point constraints at the shared face's quarter points (default)
-        (`tie: points`)."""
+        cheaper), or `tie_points` (3 by default, up to 4) point constraints at the shared face's
+        quarter points (`tie: points`, default)."""
         p, c = self.p, self.client
         fmax = float(self.params.get("max_force", 20.0))
         if self.params.get("tie", "points") == "fixed":
@@ -55,7 +55,8 @@ class CompositeBag(RigidPartsBag):
             ax = int(np.argmax(np.abs(d)))
             t1, t2 = [np.eye(3)[k] * self.cell[k] / 4 for k in range(3) if k != ax]
             mid = 0.5 * d
-            for s1, s2 in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            corners = ((1, 1), (1, -1), (-1, 1), (-1, -1))
+            for s1, s2 in corners[:int(self.params.get("tie_points", 4))]:
                 pt = mid + s1 * t1 + s2 * t2
                 cid = p.createConstraint(self.parts[a], -1, self.parts[b], -1, p.JOINT_POINT2POINT,
                                          [0, 0, 0], pt.tolist(), (pt - d).tolist(), physicsClientId=c)
