@@ -123,7 +123,7 @@ class World:
         return self._region_entry(lo, hi)[2]
 
     def _region_entry(self, lo: np.ndarray, hi: np.ndarray) -> tuple:
-        """(lo, hi, slabs, slab lows, slab highs) of the cached region holding [lo, hi]."""
+        """(lo, hi, slabs, slab lows, slab highs, slab columns) of the cached region holding [lo, hi]."""
         caches = self.__dict__.setdefault("_caches", [])
         l0, l1, l2 = lo.tolist()
         h0, h1, h2 = hi.tolist()
@@ -133,7 +133,8 @@ class World:
                 return cache[1]
         blo, bhi = lo - 0.5, hi + 0.5
         cand = self._candidates(blo, bhi)
-        entry = (blo, bhi, cand, np.ascontiguousarray(cand[:, :3]), np.ascontiguousarray(cand[:, 3:]))
+        entry = (blo, bhi, cand, np.ascontiguousarray(cand[:, :3]), np.ascontiguousarray(cand[:, 3:]),
+                 [np.ascontiguousarray(cand[:, k]) for k in range(6)])
         caches.insert(0, ((blo.tolist(), bhi.tolist()), entry))
         del caches[4:]
         return entry
@@ -154,26 +155,46 @@ class World:
             cand = cand[lb <= max(first.max(), 0.0) + 1e-12]
         return self._box_sdf(p, cand).min(axis=1)
 
+    @staticmethod
+    def _sdf_cols(p: np.ndarray, cols: list[np.ndarray]) -> np.ndarray:
+        """_box_sdf with the boxes given as six (B,) columns, axis by axis: elementwise
+        operations only (numpy's reductions over a length-3 last axis cost ~40 ns per output,
+        the whole point of this variant); same arithmetic, so the same values."""
+        out2 = mx = None
+        for ax in range(3):
+            q = p[:, ax:ax + 1]
+            m = np.maximum(cols[ax] - q, q - cols[ax + 3])
+            o = np.maximum(m, 0.0)
+            if out2 is None:
+                out2, mx = o * o, m
+            else:
+                out2 = out2 + o * o
+                mx = np.maximum(mx, m)
+        outside = np.sqrt(out2)
+        return np.where(outside > 0, outside, np.minimum(mx, 0.0))
+
     def nearest(self, points: np.ndarray) -> tuple[float, int]:
         """Smallest signed wall distance over a point set and the index of the point (exact).
 
-        Candidate slabs of the cached region are pruned by a lower bound (distance from the
-        points' bounding box) against an upper bound (the points' distance to the slab with the
-        smallest lower bound); the survivors, usually a handful, are evaluated in one call.
+        Small sets are evaluated against every candidate slab of the cached region at once;
+        large ones (FEM nodes) first prune the slabs by a lower bound (distance from the points'
+        bounding box) against an upper bound (the points' distance to the slab with the
+        smallest lower bound).
         """
         p = np.atleast_2d(np.asarray(points, dtype=float))
         lo, hi = p.min(axis=0), p.max(axis=0)
-        _, _, walls, w_lo, w_hi = self._region_entry(lo, hi)
-        if len(p) * len(walls) > 256:      # tiny queries: evaluating every candidate is cheaper
+        _, _, walls, w_lo, w_hi, cols = self._region_entry(lo, hi)
+        if len(p) * len(walls) > 4096:
             gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
             lb = np.einsum("ij,ij->i", gap, gap)                      # squared lower bounds
             k = int(lb.argmin())
             ub = float(self._box_sdf(p, walls[k:k + 1]).min())
             if ub > 0:
-                walls = walls[lb <= ub * ub * (1 + 1e-9) + 1e-18]
+                keep = lb <= ub * ub * (1 + 1e-9) + 1e-18
             else:
-                walls = walls[lb <= 0.0]
-        d = self._box_sdf(p, walls).min(axis=1)
+                keep = lb <= 0.0
+            cols = [c[keep] for c in cols]
+        d = self._sdf_cols(p, cols).min(axis=1)
         i = int(d.argmin())
         return float(d[i]), i
 
