@@ -1,8 +1,9 @@
 """Real-time factor of the simulator while the robot drives the bag, per bag model.
 
-Two figures per row: the Simulation loop (physics + the per-tick state queries sim_node makes)
-and the whole sim_node process in lockstep with this process as the controller over the ROS 2
-wire (publishing every topic, one command per tick, router in between).
+Three figures per row: the Simulation loop (physics + the per-tick state queries sim_node makes),
+the whole sim_node process in lockstep with this process as the controller over the ROS 2 wire
+(publishing every topic, one command per tick, router in between: the round trip counts), and
+sim_node in fast clock mode (no waiting: its own throughput, publishing included).
 Reference: pyastrobee 0.6x real time at 379 FEM nodes (FACTS.md section 6).
 Targets: >= 3x at ~400 nodes on one core, >= 50x for the reduced models.
 
@@ -79,14 +80,16 @@ def library_rtf(model: str, res: int, seconds: float) -> tuple[float, float, int
         sim.close()
 
 
-def node_rtf(model: str, res: int, seconds: float) -> tuple[float, float]:
-    """sim_node in lockstep with this process closing the loop over the ROS 2 wire."""
+def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep") -> tuple[float, float]:
+    """sim_node with this process closing the loop over the ROS 2 wire: in lockstep (the sim
+    waits for each tick's command: the round trip counts) or fast (no waiting: the sim's own
+    throughput with every topic published; commands then arrive a few ticks late)."""
     import roszen
     from roszen import testing
     with testing.router() as port:
         env = testing.zenoh_env(port)
         args = ["-m", "astrobee_sim.sim_node", "--ros-args", "-p", "scenario:=node2_to_jem_bag",
-                "-p", f"bag_model:={model}", "-p", "clock_mode:=lockstep",
+                "-p", f"bag_model:={model}", "-p", f"clock_mode:={mode}",
                 "-p", f"max_sim_time:={seconds + 1.0}"]
         if res:
             args += ["-p", f"bag_resolution:={res}"]
@@ -152,18 +155,21 @@ def main() -> None:
         s = secs.get((model, res), 10.0) * scale
         lib_wall, lib_cpu, nodes = library_rtf(model, res, s)
         nd_wall, nd_cpu = (float("nan"),) * 2 if a.no_node else node_rtf(model, res, s)
-        rows.append((model, nodes, s, lib_wall, lib_cpu, nd_wall, nd_cpu))
+        fast_wall, fast_cpu = (float("nan"),) * 2 if a.no_node else node_rtf(model, res, s, "fast")
+        rows.append((model, nodes, s, lib_wall, lib_cpu, nd_wall, nd_cpu, fast_wall, fast_cpu))
     print("\nsim real-time factor while a PD law drags the bag (350 Hz physics, 62.5 Hz ticks)")
     print("wall = elapsed time on this (shared, 2-core) machine; cpu = per CPU-second of the sim "
           "process (the 'one core' figure); sim_node = lockstep with this process as the controller "
-          "over the wire (includes the round trip per tick)")
+          "over the wire (includes the round trip per tick); fast = sim_node in fast clock mode "
+          "(no waiting), same controller")
     print(f"{'model':<11}{'nodes':>6}{'sim s':>6}{'Simulation wall':>16}{'cpu':>7}"
-          f"{'sim_node wall':>14}{'cpu':>7}{'target':>8}{'round 1 (lib/node)':>20}  reference (pyastrobee)")
-    for (model, nodes, s, lw, lc, nw, nc), case in zip(rows, CASES):
+          f"{'lockstep wall':>14}{'cpu':>7}{'fast wall':>10}{'cpu':>7}{'target':>8}"
+          f"{'round 1 (lib/lockstep)':>24}  reference (pyastrobee)")
+    for (model, nodes, s, lw, lc, nw, nc, fw, fc), case in zip(rows, CASES):
         ref = "0.6x at 379 nodes" if model == "fem" else "-"
         r1 = ROUND1.get(case, (float("nan"),) * 2)
         print(f"{model:<11}{nodes or '-':>6}{s:>6.1f}{lw:>15.1f}x{lc:>6.1f}x{nw:>13.1f}x{nc:>6.1f}x"
-              f"{TARGET[model]:>7.0f}x{r1[0]:>12.1f}x /{r1[1]:>5.1f}x  {ref}")
+              f"{fw:>9.1f}x{fc:>6.1f}x{TARGET[model]:>7.0f}x{r1[0]:>16.1f}x /{r1[1]:>5.1f}x  {ref}")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ pybullet client as a few static multibodies (one collider per slab, all convex b
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,7 +124,8 @@ class World:
         return self._region_entry(lo, hi)[2]
 
     def _region_entry(self, lo: np.ndarray, hi: np.ndarray) -> tuple:
-        """(lo, hi, slabs, slab lows, slab highs, slab columns) of the cached region holding [lo, hi]."""
+        """(lo, hi, slabs, slab lows, slab highs, slab columns, slabs as lists) of the cached
+        region holding [lo, hi]."""
         caches = self.__dict__.setdefault("_caches", [])
         l0, l1, l2 = lo.tolist()
         h0, h1, h2 = hi.tolist()
@@ -134,7 +136,7 @@ class World:
         blo, bhi = lo - 0.5, hi + 0.5
         cand = self._candidates(blo, bhi)
         entry = (blo, bhi, cand, np.ascontiguousarray(cand[:, :3]), np.ascontiguousarray(cand[:, 3:]),
-                 [np.ascontiguousarray(cand[:, k]) for k in range(6)])
+                 [np.ascontiguousarray(cand[:, k]) for k in range(6)], cand.tolist())
         caches.insert(0, ((blo.tolist(), bhi.tolist()), entry))
         del caches[4:]
         return entry
@@ -183,7 +185,9 @@ class World:
         """
         p = np.atleast_2d(np.asarray(points, dtype=float))
         lo, hi = p.min(axis=0), p.max(axis=0)
-        _, _, walls, w_lo, w_hi, cols = self._region_entry(lo, hi)
+        _, _, walls, w_lo, w_hi, cols, wl = self._region_entry(lo, hi)
+        if len(p) <= 8:
+            return self._nearest_few(p.tolist(), lo, hi, w_lo, w_hi, wl)
         if len(p) * len(walls) > 4096:
             gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
             lb = np.einsum("ij,ij->i", gap, gap)                      # squared lower bounds
@@ -197,6 +201,32 @@ class World:
         d = self._sdf_cols(p, cols).min(axis=1)
         i = int(d.argmin())
         return float(d[i]), i
+
+    @staticmethod
+    def _sdf_one(q: list, w: list) -> float:
+        """Signed distance of one point to one box, in floats (same arithmetic as _sdf_cols)."""
+        m0 = max(w[0] - q[0], q[0] - w[3])
+        m1 = max(w[1] - q[1], q[1] - w[4])
+        m2 = max(w[2] - q[2], q[2] - w[5])
+        o0, o1, o2 = max(m0, 0.0), max(m1, 0.0), max(m2, 0.0)
+        out = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+        return out if out > 0 else min(max(m0, m1, m2), 0.0)
+
+    def _nearest_few(self, pts: list, lo, hi, w_lo, w_hi, wl: list) -> tuple[float, int]:
+        """nearest() for a handful of points (a robot, a box's corners): slabs pruned by the
+        bounding-box lower bound in numpy, the few survivors evaluated in plain floats."""
+        gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
+        lb = np.einsum("ij,ij->i", gap, gap)                          # squared lower bounds
+        sdf = self._sdf_one
+        w0 = wl[int(lb.argmin())]
+        ub = min(sdf(q, w0) for q in pts)
+        keep = np.flatnonzero(lb <= (ub * ub * (1 + 1e-9) + 1e-18 if ub > 0 else 0.0)).tolist()
+        best, arg = math.inf, 0
+        for i, q in enumerate(pts):
+            d = min(sdf(q, wl[k]) for k in keep)
+            if d < best:
+                best, arg = d, i
+        return float(best), arg
 
     def clearance(self, points: np.ndarray) -> float:
         """Smallest signed wall distance over a set of points (e.g. a bag's nodes)."""
