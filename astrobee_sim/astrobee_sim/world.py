@@ -187,7 +187,7 @@ class World:
         lo, hi = p.min(axis=0), p.max(axis=0)
         _, _, walls, w_lo, w_hi, cols, wl = self._region_entry(lo, hi)
         if len(p) <= 8:
-            return self._nearest_few(p.tolist(), lo, hi, w_lo, w_hi, wl)
+            return self._nearest_few(p, lo, hi, w_lo, w_hi, wl, cols)
         if len(p) * len(walls) > 4096:
             gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
             lb = np.einsum("ij,ij->i", gap, gap)                      # squared lower bounds
@@ -212,18 +212,25 @@ class World:
         out = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
         return out if out > 0 else min(max(m0, m1, m2), 0.0)
 
-    def _nearest_few(self, pts: list, lo, hi, w_lo, w_hi, wl: list) -> tuple[float, int]:
+    def _nearest_few(self, p: np.ndarray, lo, hi, w_lo, w_hi, wl: list, cols: list) -> tuple[float, int]:
         """nearest() for a handful of points (a robot, a box's corners): slabs pruned by the
-        bounding-box lower bound in numpy, the few survivors evaluated in plain floats."""
+        bounding-box lower bound in numpy, the survivors evaluated in plain floats when there are
+        few point-slab pairs (else in numpy)."""
+        pts = p.tolist()
         gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
         lb = np.einsum("ij,ij->i", gap, gap)                          # squared lower bounds
         sdf = self._sdf_one
         w0 = wl[int(lb.argmin())]
         ub = min(sdf(q, w0) for q in pts)
-        keep = np.flatnonzero(lb <= (ub * ub * (1 + 1e-9) + 1e-18 if ub > 0 else 0.0)).tolist()
+        keep = np.flatnonzero(lb <= (ub * ub * (1 + 1e-9) + 1e-18 if ub > 0 else 0.0))
+        if len(keep) * len(pts) > 12:
+            d = self._sdf_cols(p, [c[keep] for c in cols]).min(axis=1)
+            i = int(d.argmin())
+            return float(d[i]), i
         best, arg = math.inf, 0
+        ks = keep.tolist()
         for i, q in enumerate(pts):
-            d = min(sdf(q, wl[k]) for k in keep)
+            d = min(sdf(q, wl[k]) for k in ks)
             if d < best:
                 best, arg = d, i
         return float(best), arg
