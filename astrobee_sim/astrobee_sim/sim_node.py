@@ -10,7 +10,10 @@ Global: /clock, /tf, /sim/bag/state, /sim/bag/mesh (mesh_rate), /sim/contacts, l
 Clock modes: realtime (paced to the wall clock), fast (no pacing), lockstep (after publishing
 the state of tick k the sim waits, at most `lockstep_timeout` s of wall time, for a command
 stamped >= tick k on every robot whose command topic has a publisher; on timeout it logs and
-steps on, the propulsion watchdog then acting as on the robot).
+steps on, the propulsion watchdog then acting as on the robot). Commands stamped more than
+`command_max_lead` (0.5 s) ahead of sim time are dropped with a rate-limited warning: after a
+reset sim time restarts at 0, so answers to pre-reset states land there; a reset also forgets
+the lockstep command stamps, and a command counts for the current tick at most.
 """
 from __future__ import annotations
 

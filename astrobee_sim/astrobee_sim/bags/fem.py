@@ -4,6 +4,12 @@ Needs a client reset with RESET_USE_DEFORMABLE_WORLD. Node positions come from g
 velocities are finite differences of successive node positions (getBaseVelocity is wrong for
 soft bodies). Snapshot = node positions (+ previous positions for the velocity estimate); the
 rigid bodies are snapshotted by the caller's saveState.
+
+Speed (measured round two, 412 nodes, 350 Hz, stiffness 50, damping 0.1): stepSimulation is
+~86% of the loop at ~2 ms a step (3x real time needs <= 0.95 ms). Neither numSolverIterations
+(50 -> 1), nor filtering or removing every wall, nor filtering the robot-bag contact changed it
+beyond noise: the cost is the deformable world's implicit mass-spring solve, whose parameters
+pybullet 3.2.7 does not expose.
 """
 from __future__ import annotations
 
