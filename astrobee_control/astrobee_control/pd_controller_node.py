@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from astrobee import config, flight_modes
+from astrobee import config, flight_modes, node_main
 from astrobee import rotations as rot
 
 from . import mass as mp
@@ -290,15 +290,7 @@ class PdControllerNode:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (`ros2 run astrobee_control pd_controller_node`)."""
-    argv = sys.argv if argv is None else argv
-    node = PdControllerNode(argv)
-    try:
-        node.node.spin()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.node.destroy_node()
-    return 0
+    return node_main.run(PdControllerNode, argv)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ import numpy as np
 import roszen
 from roszen import Durability, QoSProfile
 
-from astrobee import config
+from astrobee import config, node_main
 
 from . import conversions as cv
 from . import local_planner, planner
@@ -136,15 +136,7 @@ class PlannerNode:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (`ros2 run astrobee_planning planner_node`)."""
-    argv = sys.argv if argv is None else argv
-    node = PlannerNode(argv)
-    try:
-        node.node.spin()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.node.destroy_node()
-    return 0
+    return node_main.run(PlannerNode, argv)
 
 
 if __name__ == "__main__":
