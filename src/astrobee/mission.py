@@ -330,7 +330,10 @@ class MissionClient:
                             f"t={el:5.1f}/{plan.duration:.1f} s  err {e:.3f} m  "
                             f"clear {c:.2f} m  {rtf:4.1f}x real time")
 
-        self.spin_until(controlling_seen, 30.0, "the controller to accept the segment", tick)
+        # A controller that dies before its CONTROLLING state reaches us (its latched state
+        # dies with it) shows up as the sim's watchdog fault: stop waiting then, too.
+        self.spin_until(lambda: controlling_seen() or faulted(), 30.0,
+                        "the controller to accept the segment", tick)
         self.spin_until(finished, wall_timeout, "the end of the flight", tick)
         if fault_seen:
             res.sim_t1, res.wall_t1 = self.sim_time, time.time()
