@@ -5,7 +5,8 @@ node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <r
 clock (realtime | fast | lockstep; default lockstep headless: the sim waits for each
 command, as fast as the graph answers; realtime with gui), lockstep_timeout (wall s the sim
 waits for a tick's command before stepping on; the sim's default when unset), gui (true |
-false), mission (true | false: run the mission client, default true), demo (true: fly
+false), bag_model / bag_variant / bag_resolution (override the scenario's bag on sim_node),
+mission (true | false: run the mission client, default true), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 With the mission running, the controller's death does not end the launch by itself: the sim's
@@ -47,6 +48,15 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
                               f"got '{ctx.arg('lockstep_timeout')}'") from None
         if not sim_params["lockstep_timeout"] > 0:
             raise LaunchError("lockstep_timeout must be > 0")
+    for key in ("bag_model", "bag_variant"):       # override the scenario's bag
+        if ctx.arg(key):
+            sim_params[key] = ctx.arg(key)
+    if ctx.arg("bag_resolution"):
+        try:
+            sim_params["bag_resolution"] = int(ctx.arg("bag_resolution"))
+        except ValueError:
+            raise LaunchError(f"bag_resolution must be a node count, "
+                              f"got '{ctx.arg('bag_resolution')}'") from None
     mission = ctx.flag("mission", True)
     port = ctx.port
     nodes = [
