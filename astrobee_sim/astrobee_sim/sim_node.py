@@ -281,12 +281,14 @@ class SimNode:
         _stamp(clk.clock, t)
         self.pub_clock.publish(clk)
         transforms = []
+        positions = []
         for name, r in self.sim.robots.items():
             io = self.robot_io[name]
             msgs = io.get("msgs")
             if msgs is None:
                 msgs = io["msgs"] = self._robot_msgs(name)
             pos, q, v, w = self.sim.robot_state(name)
+            positions.append(pos)
             ps, tw, ekf, ts = msgs["pose"], msgs["twist"], msgs["ekf"], msgs["tfs"]
             _stamp(ps.header.stamp, t)               # shared by twist, ekf and tf
             _pose(ps.pose, pos, q)                   # shared by ekf (and its rotation by tf)
@@ -311,7 +313,7 @@ class SimNode:
                              if fault else "commands flowing")
                 io["fault"].publish(f)
         bag = self.sim.bag
-        rc, bc = self.sim.clearance()
+        rc, bc = self.sim.clearance(positions)
         if bag is not None:
             st = bag.state()
             bs, bts = g["bag"], g["bag_tfs"]

@@ -258,12 +258,16 @@ class Simulation:
                 out.append(Contact("bag", "iss", x[i].copy(), np.zeros(3), 0.0))
         return out
 
-    def clearance(self) -> tuple[float, float]:
-        """Smallest distance of the robots' envelope and of the bag to a wall (m)."""
+    def clearance(self, robot_positions: list | None = None) -> tuple[float, float]:
+        """Smallest distance of the robots' envelope and of the bag to a wall (m).
+
+        robot_positions: the robots' current positions in self.robots order when the caller
+        already read them this step (saves a pybullet state query per robot)."""
         if not self.robots:
             rc = -1.0
         else:
-            pts = np.array([r.state()[0] for r in self.robots.values()])
+            pts = np.array(robot_positions if robot_positions is not None
+                           else [r.state()[0] for r in self.robots.values()])
             rc = self.world.clearance(pts) - self._half_envelope
         bc = self._bag_nearest()[0] if self.bag is not None else -1.0
         return rc, bc
