@@ -21,6 +21,21 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def pid_alive(pid: int) -> bool:
+    """True while a process exists and is not a zombie (for no-leftover checks in tests)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
 def wait_port(port: int, timeout: float = 10.0, host: str = "127.0.0.1") -> bool:
     """Poll until something accepts TCP connections on port (bounded)."""
     end = time.monotonic() + timeout

@@ -8,7 +8,6 @@ import re
 import selectors
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -16,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from roszen.testing import free_port, pid_alive
 import yaml
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
@@ -34,24 +35,6 @@ SHORT_HOP = {
     "goal": {"position": [10.95, -0.9, 4.84],
              "orientation": [0.0, 0.0, -0.7071067811865476, 0.7071067811865476]},
 }
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 @pytest.fixture
