@@ -15,6 +15,8 @@ import numpy as np
 from astrobee import config
 
 MIN_PIECE = 1e-4  # m, slabs thinner than this are dropped
+CELL = 0.25       # m, grid cell of the wall-distance candidate cache (point sets)
+FINE = 0.1        # m, the same for single points (robots): fewer candidates per cell
 
 
 def subtract_box(a: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
@@ -107,61 +109,79 @@ class World:
         outside = np.sqrt(np.add.reduce(o * o, axis=2))
         return np.where(outside > 0, outside, np.minimum(m.max(axis=2), 0.0))
 
-    def _candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Slabs that can be nearest to some point of the box [lo, hi]: those whose distance to
-        the box is at most the largest distance from the box to the slab nearest its centre."""
-        gap = np.maximum(np.maximum(self.walls[:, :3] - hi, lo - self.walls[:, 3:]), 0.0)
-        lb = np.linalg.norm(gap, axis=1)
-        c = 0.5 * (lo + hi)
-        d_c = self._box_sdf(c[None], self.walls)[0]
-        k = int(d_c.argmin())
-        ub = max(d_c[k], 0.0) + float(np.linalg.norm(hi - lo)) / 2
-        return self.walls[lb <= ub + 1e-12]
+    # ---- exact wall-distance queries through a lazily filled grid of candidate slabs --------
+    # Each CELL-sized grid cell keeps the few slabs that can be nearest to some point in it: a
+    # slab stays when its distance to the cell is at most the smallest, over all slabs, of the
+    # cell's farthest distance to that slab (the nearest slab of any point in the cell passes
+    # this test, so the answer is exact). A query takes the union over the cells of the points'
+    # bounding box (cached per box of cells) and evaluates only those slabs: ~5-15 instead of
+    # the station's ~400, a few microseconds per query instead of a scan.
 
-    def _region(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Candidate slabs for points inside [lo, hi], cached per region (the box grown by
-        0.5 m, reused while queries stay inside it; a few regions kept for robots and bag)."""
-        return self._region_entry(lo, hi)[2]
+    def _cell_slabs(self, key: tuple, size: float = CELL) -> np.ndarray:
+        """Indices of the slabs that can be nearest to a point of grid cell `key` (cells of
+        `size` metres)."""
+        cells = self.__dict__.setdefault("_cells", {}).setdefault(size, {})
+        idx = cells.get(key)
+        if idx is None:
+            lo = np.asarray(key, dtype=float) * size
+            hi = lo + size
+            w_lo, w_hi = self.walls[:, :3], self.walls[:, 3:]
+            gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
+            lb = np.einsum("ij,ij->i", gap, gap)
+            # farthest point of the cell from each slab: per axis (the squared distance is a sum
+            # of convex per-axis terms) the worse of the cell's two faces
+            far = np.maximum(np.maximum(np.maximum(w_lo - lo, lo - w_hi),
+                                        np.maximum(w_lo - hi, hi - w_hi)), 0.0)
+            ub = float(np.einsum("ij,ij->i", far, far).min())
+            idx = np.flatnonzero(lb <= ub * (1 + 1e-9) + 1e-18)
+            cells[key] = idx
+        return idx
 
-    def _region_entry(self, lo: np.ndarray, hi: np.ndarray) -> tuple:
-        """(lo, hi, slabs, slab lows, slab highs, slab columns, slabs as lists) of the cached
-        region holding [lo, hi]."""
-        caches = self.__dict__.setdefault("_caches", [])
-        l0, l1, l2 = lo.tolist()
-        h0, h1, h2 = hi.tolist()
-        for cache in caches:
-            (a0, a1, a2), (b0, b1, b2) = cache[0]
-            if a0 <= l0 and a1 <= l1 and a2 <= l2 and h0 <= b0 and h1 <= b1 and h2 <= b2:
-                return cache[1]
-        blo, bhi = lo - 0.5, hi + 0.5
-        cand = self._candidates(blo, bhi)
-        entry = (blo, bhi, cand, np.ascontiguousarray(cand[:, :3]), np.ascontiguousarray(cand[:, 3:]),
-                 [np.ascontiguousarray(cand[:, k]) for k in range(6)], cand.tolist())
-        caches.insert(0, ((blo.tolist(), bhi.tolist()), entry))
-        del caches[4:]
+    def _block(self, klo: list, khi: list, size: float = CELL) -> tuple:
+        """(slab columns, slabs as lists, slab lows, slab highs) of the union of the cells
+        klo..khi (inclusive)."""
+        key = (*klo, *khi, size)
+        blocks = self.__dict__.setdefault("_blocks", {})
+        entry = blocks.get(key)
+        if entry is None:
+            ids = [self._cell_slabs((i, j, k), size)
+                   for i in range(klo[0], khi[0] + 1)
+                   for j in range(klo[1], khi[1] + 1)
+                   for k in range(klo[2], khi[2] + 1)]
+            sel = self.walls[np.unique(np.concatenate(ids))]
+            entry = ([np.ascontiguousarray(sel[:, k]) for k in range(6)], sel.tolist(),
+                     np.ascontiguousarray(sel[:, :3]), np.ascontiguousarray(sel[:, 3:]))
+            if len(blocks) >= 512:             # the robots move on: forget the oldest boxes
+                del blocks[next(iter(blocks))]
+            blocks[key] = entry
         return entry
 
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (m) from each point to the nearest wall slab (negative inside a wall).
 
-        Exact: only slabs that can be some point's nearest are evaluated (region cache, then
-        a bound from the points' own box).
-        """
+        Exact (only slabs that cannot be any point's nearest are skipped)."""
         p = np.atleast_2d(np.asarray(points, dtype=float))
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        cand = self._region(lo, hi)
-        if len(cand) > 4 and len(p) > 1:
-            gap = np.maximum(np.maximum(cand[:, :3] - hi, lo - cand[:, 3:]), 0.0)
-            lb = np.linalg.norm(gap, axis=1)
-            first = self._box_sdf(p, cand[[int(lb.argmin())]])[:, 0]
-            cand = cand[lb <= max(first.max(), 0.0) + 1e-12]
-        return self._box_sdf(p, cand).min(axis=1)
+        keys = np.floor(p * (1.0 / CELL)).astype(int)
+        klo, khi = keys.min(axis=0), keys.max(axis=0)
+        if np.prod(khi - klo + 1) <= 64:      # one box of cells (a bag, a robot)
+            cols = self._block(klo.tolist(), khi.tolist())[0]
+            return self._sdf_cols(p, cols).min(axis=1)
+        out = np.empty(len(p))               # points spread over the station: cell by cell
+        uniq, inv = np.unique(keys, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        order = np.argsort(inv, kind="stable")
+        bounds = np.searchsorted(inv[order], np.arange(len(uniq) + 1))
+        for u, k in enumerate(uniq.tolist()):
+            sel = order[bounds[u]:bounds[u + 1]]
+            cols = self._block(k, k)[0]
+            out[sel] = self._sdf_cols(p[sel], cols).min(axis=1)
+        return out
 
     @staticmethod
     def _sdf_cols(p: np.ndarray, cols: list[np.ndarray]) -> np.ndarray:
-        """_box_sdf with the boxes given as six (B,) columns, axis by axis: elementwise
-        operations only (numpy's reductions over a length-3 last axis cost ~40 ns per output,
-        the whole point of this variant); same arithmetic, so the same values."""
+        """(P, B) signed distances with the boxes given as six (B,) columns, axis by axis:
+        elementwise operations only (numpy's reductions over a length-3 last axis cost ~40 ns
+        per output); the same arithmetic as _box_sdf, so the same values."""
         out2 = mx = None
         for ax in range(3):
             q = p[:, ax:ax + 1]
@@ -175,33 +195,6 @@ class World:
         outside = np.sqrt(out2)
         return np.where(outside > 0, outside, np.minimum(mx, 0.0))
 
-    def nearest(self, points: np.ndarray) -> tuple[float, int]:
-        """Smallest signed wall distance over a point set and the index of the point (exact).
-
-        Small sets are evaluated against every candidate slab of the cached region at once;
-        large ones (FEM nodes) first prune the slabs by a lower bound (distance from the points'
-        bounding box) against an upper bound (the points' distance to the slab with the
-        smallest lower bound).
-        """
-        p = np.atleast_2d(np.asarray(points, dtype=float))
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        _, _, walls, w_lo, w_hi, cols, wl = self._region_entry(lo, hi)
-        if len(p) <= 8:
-            return self._nearest_few(p, lo, hi, w_lo, w_hi, wl, cols)
-        if len(p) * len(walls) > 4096:
-            gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
-            lb = np.einsum("ij,ij->i", gap, gap)                      # squared lower bounds
-            k = int(lb.argmin())
-            ub = float(self._box_sdf(p, walls[k:k + 1]).min())
-            if ub > 0:
-                keep = lb <= ub * ub * (1 + 1e-9) + 1e-18
-            else:
-                keep = lb <= 0.0
-            cols = [c[keep] for c in cols]
-        d = self._sdf_cols(p, cols).min(axis=1)
-        i = int(d.argmin())
-        return float(d[i]), i
-
     @staticmethod
     def _sdf_one(q: list, w: list) -> float:
         """Signed distance of one point to one box, in floats (same arithmetic as _sdf_cols)."""
@@ -212,28 +205,34 @@ class World:
         out = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
         return out if out > 0 else min(max(m0, m1, m2), 0.0)
 
-    def _nearest_few(self, p: np.ndarray, lo, hi, w_lo, w_hi, wl: list, cols: list) -> tuple[float, int]:
-        """nearest() for a handful of points (a robot, a box's corners): slabs pruned by the
-        bounding-box lower bound in numpy, the survivors evaluated in plain floats when there are
-        few point-slab pairs (else in numpy)."""
-        pts = p.tolist()
-        gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
-        lb = np.einsum("ij,ij->i", gap, gap)                          # squared lower bounds
-        sdf = self._sdf_one
-        w0 = wl[int(lb.argmin())]
-        ub = min(sdf(q, w0) for q in pts)
-        keep = np.flatnonzero(lb <= (ub * ub * (1 + 1e-9) + 1e-18 if ub > 0 else 0.0))
-        if len(keep) * len(pts) > 12:
-            d = self._sdf_cols(p, [c[keep] for c in cols]).min(axis=1)
-            i = int(d.argmin())
-            return float(d[i]), i
-        best, arg = math.inf, 0
-        ks = keep.tolist()
-        for i, q in enumerate(pts):
-            d = min(sdf(q, wl[k]) for k in ks)
-            if d < best:
-                best, arg = d, i
-        return float(best), arg
+    def nearest(self, points: np.ndarray) -> tuple[float, int]:
+        """Smallest signed wall distance over a point set and the index of that point (exact)."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        if len(p) == 1:                      # a robot: plain floats beat numpy's per-call cost
+            q = p[0].tolist()
+            k = [math.floor(c * (1.0 / FINE)) for c in q]
+            cols, wl, _, _ = self._block(k, k, FINE)
+            if len(wl) > 12:
+                return float(self._sdf_cols(p, cols).min()), 0
+            sdf = self._sdf_one
+            return float(min(sdf(q, w) for w in wl)), 0
+        keys = np.floor(p * (1.0 / CELL)).astype(int)
+        klo, khi = keys.min(axis=0), keys.max(axis=0)
+        if np.prod(khi - klo + 1) > 64:
+            d = self.wall_distance(p)
+        else:
+            cols, _, w_lo, w_hi = self._block(klo.tolist(), khi.tolist())
+            if len(p) * len(w_lo) > 1024:    # FEM nodes: keep the slabs that can hold the minimum
+                lo, hi = p.min(axis=0), p.max(axis=0)
+                gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
+                lb = np.einsum("ij,ij->i", gap, gap)          # squared, to the points' box
+                k = int(lb.argmin())
+                ub = float(self._sdf_cols(p, [c[k:k + 1] for c in cols]).min())
+                keep = lb <= (ub * ub * (1 + 1e-9) + 1e-18 if ub > 0 else 0.0)
+                cols = [c[keep] for c in cols]
+            d = self._sdf_cols(p, cols).min(axis=1)
+        i = int(d.argmin())
+        return float(d[i]), i
 
     def clearance(self, points: np.ndarray) -> float:
         """Smallest signed wall distance over a set of points (e.g. a bag's nodes)."""
