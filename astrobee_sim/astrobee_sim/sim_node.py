@@ -17,11 +17,14 @@ the lockstep command stamps, and a command counts for the current tick at most.
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
 from typing import Any
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")    # before numpy: see astrobee_sim/__init__.py
+
+import numpy as np  # noqa: E402
 
 from astrobee import config, flight_modes
 from .robot import qrot
