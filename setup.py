@@ -3,7 +3,7 @@
 pyproject.toml holds the metadata; this file only computes the package list, because the
 packages live in several top-level folders (src/, and the ament_python package folders).
 """
-from setuptools import find_packages, setup
+from setuptools import find_namespace_packages, find_packages, setup
 
 ROOTS = {
     "roszen": "src/roszen",
@@ -18,7 +18,10 @@ for name, path in ROOTS.items():
     packages.append(name)
     packages += [f"{name}.{sub}" for sub in find_packages(path)]
 
-# The shipped interface definitions (.msg/.srv + package.xml) are data of roszen.
-package_data = {"roszen": ["interfaces/*/package.xml", "interfaces/*/msg/*.msg", "interfaces/*/srv/*.srv"]}
+# The shipped interface definitions (.msg/.srv + package.xml) are data packages of roszen
+# (listed as packages, so setuptools neither warns nor drops them).
+packages += [f"roszen.interfaces.{sub}" for sub in find_namespace_packages("src/roszen/interfaces")
+             if "__pycache__" not in sub]
+package_data = {"": ["package.xml", "*.msg", "*.srv"]}
 
 setup(packages=packages, package_dir=ROOTS, package_data=package_data)
