@@ -138,7 +138,7 @@ class SimNode:
                 "mode": n.create_publisher("astrobee_msgs/msg/FlightMode", f"{ns}/mob/flight_mode",
                                            roszen.LATCHED),
                 "fault": n.create_publisher("astrobee_msgs/msg/Fault", f"{ns}/sim/fault", roszen.LATCHED),
-                "cmd_stamp": -1, "fault_state": None, "topic": f"{ns}/gnc/ctl/command",
+                "cmd_stamp": -1, "raw_stamp": -1, "fault_state": None, "topic": f"{ns}/gnc/ctl/command",
             }
             n.create_subscription("astrobee_msgs/msg/FamCommand", f"{ns}/gnc/ctl/command",
                                   lambda msg, nm=name: self._on_command(nm, msg), 10)
@@ -178,8 +178,12 @@ class SimNode:
             return
         io = self.robot_io[name]
         # a command never answers a tick the sim has not reached: lockstep counts it for the
-        # current tick at most (a slightly-ahead stamp must not let later ticks run unanswered)
-        io["cmd_stamp"] = max(io["cmd_stamp"], min(stamp, now))
+        # current tick at most (a slightly-ahead stamp must not let later ticks run unanswered),
+        # and a stamp answers one tick only (repeats of one command arriving a tick apart, as
+        # on a loaded machine, must not each let the sim step on)
+        if stamp != io["raw_stamp"]:
+            io["raw_stamp"] = stamp
+            io["cmd_stamp"] = max(io["cmd_stamp"], min(stamp, now))
 
     def _on_set_mode(self, req: Any, robot: str | None) -> Any:
         resp = self.roszen.response_class("astrobee_msgs/srv/SetFlightMode")()
@@ -205,7 +209,7 @@ class SimNode:
             return resp
         self._make_robot_io()
         for io in self.robot_io.values():
-            io["cmd_stamp"], io["fault_state"] = -1, None
+            io["cmd_stamp"], io["raw_stamp"], io["fault_state"] = -1, -1, None
         self.tick = 0
         self._wall0, self._sim0 = time.monotonic(), 0.0
         self.publish_markers()

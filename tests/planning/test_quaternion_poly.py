@@ -24,19 +24,23 @@ def test_boundary_conditions_with_nonzero_rates(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_rates_match_finite_differences(seed):
+    """w and alpha against central differences with steps where truncation and rounding are both
+    far below the tolerance (a second difference at h=1e-5 is rounding noise of ~2e-4)."""
     q0, w0, a0, q1, w1, a1 = _random_case(seed)
     p = QuaternionPolynomial.from_boundary(q0, w0, a0, q1, w1, a1, 5.0)
-    h = 1e-5
-    for t in (0.0 + 2 * h, 1.3, 2.5, 4.9, 5.0 - 2 * h):
-        qm, qc, qp = (p.evaluate([t + d])[0][0] for d in (-h, 0.0, h))
-        qd = (qp - qm) / (2 * h)
-        qdd = (qp - 2 * qc + qm) / h**2
-        w_fd = 2 * rot.multiply(qd, rot.conjugate(qc))[:3]
+    h1, h2 = 1e-5, 1e-3           # first difference: rounding ~1e-11; second: truncation ~1e-7
+    for t in (0.0 + 2 * h2, 1.3, 2.5, 4.9, 5.0 - 2 * h2):
+        qm, qc, qp = (p.evaluate([t + d])[0][0] for d in (-h1, 0.0, h1))
+        w_fd = 2 * rot.multiply((qp - qm) / (2 * h1), rot.conjugate(qc))[:3]
         _, w, a = p.evaluate([t])
         np.testing.assert_allclose(w[0], w_fd, atol=1e-7)
-        # alpha from the second difference: vec(2 q'' q*) (q' q'* is scalar)
-        a_fd = 2 * rot.multiply(qdd, rot.conjugate(qc))[:3]
-        np.testing.assert_allclose(a[0], a_fd, atol=2e-4)
+        # alpha from the second difference of q: vec(2 q'' q*) (q' q'* is scalar)
+        qm, qp = (p.evaluate([t + d])[0][0] for d in (-h2, h2))
+        a_fd = 2 * rot.multiply((qp - 2 * qc + qm) / h2**2, rot.conjugate(qc))[:3]
+        np.testing.assert_allclose(a[0], a_fd, atol=1e-5)
+        # and from the first difference of the analytic w
+        _, (wm, wp), _ = p.evaluate([t - h2, t + h2])
+        np.testing.assert_allclose(a[0], (wp - wm) / (2 * h2), atol=1e-5)
     # the end values by one-sided differences of w
     _, w_end, _ = p.evaluate([5.0 - 1e-4, 5.0])
     assert np.allclose((w_end[1] - w_end[0]) / 1e-4, a1, atol=1e-3)
