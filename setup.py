@@ -8,6 +8,7 @@ from setuptools import find_namespace_packages, find_packages, setup
 ROOTS = {
     "roszen": "src/roszen",
     "astrobee": "src/astrobee",
+    "astrobee_bringup": "src/astrobee_bringup",
     "astrobee_sim": "astrobee_sim/astrobee_sim",
     "astrobee_planning": "astrobee_planning/astrobee_planning",
     "astrobee_control": "astrobee_control/astrobee_control",

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from astrobee import config, flight_modes, node_main
+from astrobee import config, flight_modes
+from roszen import node_main
 from astrobee import rotations as rot
 
 from . import mass as mp

@@ -17,7 +17,8 @@ import numpy as np
 import roszen
 from roszen import Durability, QoSProfile
 
-from astrobee import config, node_main
+from astrobee import config
+from roszen import node_main
 
 from . import conversions as cv
 from . import local_planner, planner

@@ -23,6 +23,12 @@ def project_root() -> Path:
     return Path(__file__).resolve().parents[2]
 
 
+def msgs_dir() -> Path:
+    """The astrobee_msgs interface package (declared to roszen's typestore by the
+    `roszen.interfaces` entry point, so no import of this package touches the transport)."""
+    return project_root() / "astrobee_msgs"
+
+
 def config_dir() -> Path:
     env = os.environ.get("ASTROBEE_CONFIG_DIR")
     return Path(env) if env else project_root() / "config"

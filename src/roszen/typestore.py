@@ -86,9 +86,33 @@ def _scan_package(pkg_dir: Path) -> None:
                     _index[f"{pkg}/{kind}/{f.stem}"] = f
 
 
+_entry_points_read = False
+
+
+def _entry_point_paths() -> list[Path]:
+    """Interface directories declared by installed distributions in the `roszen.interfaces`
+    entry-point group (a callable returning a path, or a path string attribute)."""
+    from importlib.metadata import entry_points
+    out = []
+    for ep in entry_points(group="roszen.interfaces"):
+        try:
+            obj = ep.load()
+            p = Path(obj() if callable(obj) else obj).expanduser().resolve()
+        except Exception:   # a broken declaration must not break every other type
+            continue
+        if p.is_dir():
+            out.append(p)
+    return out
+
+
 def _refresh() -> None:
     """Index the files of paths not scanned yet (called under the lock)."""
-    global _env_seen
+    global _env_seen, _entry_points_read
+    if not _entry_points_read:
+        _entry_points_read = True
+        for p in _entry_point_paths():
+            if p not in _paths:
+                _paths.append(p)
     env = os.environ.get(ENV_VAR, "")
     if env != _env_seen:
         _env_seen = env

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from astrobee.launcher import Launcher, LaunchError, NodeSpec
+from astrobee_bringup.launcher import Launcher, LaunchError, NodeSpec
 from conftest import ASTROBEE, HERE, graph_env, pid_alive
 
 FAKE = str(HERE / "launch_files" / "fake_graph.py")
@@ -113,8 +113,8 @@ def test_unknown_description_and_bad_argument(procs, tmp_path):
 
 
 def test_cargo_transport_lists_the_graph(tmp_path):
-    from astrobee.launch import cargo_transport
-    from astrobee.launcher import LaunchContext, find_config_dir
+    from astrobee_bringup.launch import cargo_transport
+    from astrobee_bringup.launcher import LaunchContext, find_config_dir
     ctx = LaunchContext({"scenario": "node2_to_jem"}, find_config_dir(), tmp_path, False, 7447)
     specs = cargo_transport.generate_nodes(ctx)
     names = [s.name for s in specs]

@@ -53,7 +53,7 @@ class Launch:
         env = dict(os.environ, ASTROBEE_CONFIG_DIR=str(config_dir), PYTHONUNBUFFERED="1")
         env.pop("ZENOH_CONFIG_OVERRIDE", None)
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "astrobee.cli", "launch", "cargo_transport", *args,
+            [sys.executable, "-m", "astrobee_bringup.cli", "launch", "cargo_transport", *args,
              "--port", str(free_port()), "--run-dir", str(run_dir)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             env=env, start_new_session=True, text=True)

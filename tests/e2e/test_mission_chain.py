@@ -45,10 +45,10 @@ def test_mission_chain_with_fake_sim(tmp_path):
                          [py, "-m", "astrobee_planning.planner_node"],
                          [py, "-m", "astrobee_control.pd_controller_node", "--ros-args",
                           "-p", "use_sim_time:=true"],
-                         [py, "-m", "astrobee.cli", "bag", "record", "-a", "-o", str(run / "bag")]):
+                         [py, "-m", "astrobee_bringup.cli", "bag", "record", "-a", "-o", str(run / "bag")]):
                 procs.append(testing.spawn(argv, env, stdout=subprocess.DEVNULL,
                                            stderr=subprocess.DEVNULL))
-            mission = subprocess.run([py, "-m", "astrobee.mission", "--scenario", "hop",
+            mission = subprocess.run([py, "-m", "astrobee_bringup.mission", "--scenario", "hop",
                                       "--run-dir", str(run), "--timeout", "120"], env=env,
                                      capture_output=True, text=True, timeout=180)
         finally:
@@ -61,7 +61,7 @@ def test_mission_chain_with_fake_sim(tmp_path):
     assert summary["plan_duration"] > 10 and summary["duration"] >= summary["plan_duration"] - 0.1
     assert (run / "plot.png").stat().st_size > 10_000
 
-    from astrobee.summary import finalize
+    from astrobee_bringup.summary import finalize
     assert "SUCCESS" in finalize(run, run / "bag")
     assert json.loads((run / "summary.json").read_text())["legs"][0]["plot_source"] == "bag"
 

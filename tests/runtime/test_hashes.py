@@ -3,7 +3,6 @@ import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from zenoh_ros2_sdk import utils as zutils
 
-import astrobee  # noqa: F401  (registers astrobee_msgs)
 from roszen import typestore as ts
 
 KNOWN = {

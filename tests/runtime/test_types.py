@@ -11,7 +11,6 @@ import pytest
 import yaml
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
-import astrobee  # noqa: F401  (registers astrobee_msgs)
 from roszen import typestore as ts
 from roszen.types.classes import DTYPES, attr_name
 from roszen.types.spec import FLOATS, INT_RANGES, STRINGS
@@ -382,7 +381,8 @@ def test_message_definition_rosbag2_layout():
 
 
 def astrobee_root():
-    return os.path.join(os.path.dirname(os.path.dirname(astrobee.__file__)), "..", "astrobee_msgs")
+    from astrobee.config import msgs_dir
+    return str(msgs_dir())
 
 
 def test_definition_text_and_listing():

@@ -117,9 +117,9 @@ def load_description(name: str) -> Callable[[LaunchContext], list[NodeSpec]]:
         spec.loader.exec_module(module)
     else:
         try:
-            module = importlib.import_module(f"astrobee.launch.{name}")
+            module = importlib.import_module(f"astrobee_bringup.launch.{name}")
         except ModuleNotFoundError as exc:
-            if exc.name != f"astrobee.launch.{name}":
+            if exc.name != f"astrobee_bringup.launch.{name}":
                 raise
             raise LaunchError(f"no launch description '{name}' "
                               f"(known: {', '.join(list_descriptions()) or 'none'})") from None
@@ -130,7 +130,7 @@ def load_description(name: str) -> Callable[[LaunchContext], list[NodeSpec]]:
 
 
 def list_descriptions() -> list[str]:
-    """Names of the launch descriptions shipped in astrobee/launch/."""
+    """Names of the launch descriptions shipped in astrobee_bringup/launch/."""
     d = Path(__file__).resolve().parent / "launch"
     return sorted(p.stem for p in d.glob("*.py") if not p.stem.startswith("_"))
 
@@ -180,7 +180,7 @@ class Launcher:
         self.sigint_timeout = sigint_timeout
         self.sigterm_timeout = sigterm_timeout
         self.stop_grace = stop_grace
-        self.astrobee_cmd = astrobee_cmd or [sys.executable, "-m", "astrobee.cli"]
+        self.astrobee_cmd = astrobee_cmd or [sys.executable, "-m", "astrobee_bringup.cli"]
         self.registry = registry
         self.procs: list[tuple[NodeSpec, subprocess.Popen]] = []
         self._threads: list[threading.Thread] = []

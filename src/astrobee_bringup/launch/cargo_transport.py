@@ -16,7 +16,7 @@ exits, so the bag holds the fault and the coasting robot. Without it, the contro
 from __future__ import annotations
 
 from astrobee.config import load_yaml
-from astrobee.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
+from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
 
 
 def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
@@ -79,13 +79,13 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         nodes.append(NodeSpec("mission", "astrobee", "mission", kind="client",
                               command=["run", "astrobee", "mission", *args],
-                              ros2_command=[sys.executable, "-m", "astrobee.mission", *args]))
+                              ros2_command=[sys.executable, "-m", "astrobee_bringup.mission", *args]))
     return nodes
 
 
 def post_run(ctx: LaunchContext, status: int) -> None:
     """Once the graph has stopped: plots and bag figures of the run read back from its bag."""
-    from astrobee.summary import finalize
+    from astrobee_bringup.summary import finalize
     bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
     if ctx.flag("record", True) and ctx.flag("mission", True):
         print(finalize(ctx.run_dir, bag_dir), flush=True)

@@ -17,14 +17,14 @@ NODES: dict[tuple[str, str], str] = {
     ("astrobee_planning", "planner_node"): "astrobee_planning.planner_node:main",
     ("astrobee_control", "pd_controller_node"): "astrobee_control.pd_controller_node:main",
     ("astrobee_control", "mpc_controller_node"): "astrobee_control.mpc_controller_node:main",
-    ("astrobee", "mission"): "astrobee.mission:main",   # the mission client of a launch
+    ("astrobee", "mission"): "astrobee_bringup.mission:main",   # the mission client of a launch
 }
 
 USAGE = """usage: astrobee <command> [args]
 
 commands:
   run PKG EXE [--ros-args ...]   start one node (like `ros2 run`)
-  launch NAME [arg:=value ...]   start a launch description (astrobee/launch/NAME.py)
+  launch NAME [arg:=value ...]   start a launch description (astrobee_bringup/launch/NAME.py)
   router [--port P]              run the Zenoh router (rmw_zenohd equivalent)
   topic | service | node | param | interface | bag   ros2-style verbs (`astrobee topic -h`)
 """
@@ -32,11 +32,11 @@ commands:
 
 def _launch(argv: list[str]) -> int:
     import argparse
-    from astrobee import launcher
+    from astrobee_bringup import launcher
 
     p = argparse.ArgumentParser(prog="astrobee launch",
                                 description="Start a launch description's nodes.")
-    p.add_argument("name", nargs="?", help="launch description (module in astrobee/launch/ "
+    p.add_argument("name", nargs="?", help="launch description (module in astrobee_bringup/launch/ "
                    "or a .py file)")
     p.add_argument("args", nargs="*", help="launch arguments name:=value")
     p.add_argument("--port", type=int, default=7447, help="router port (default 7447)")

@@ -1,12 +1,12 @@
 """The mission client: plan a scenario's route, hand it to the controller, follow it to the end
 and write the run's summary.json and plot.
 
-    python -m astrobee.mission --scenario node2_to_jem --run-dir runs/X [--scenario node2_to_jem_bag]
+    python -m astrobee_bringup.mission --scenario node2_to_jem --run-dir runs/X [--scenario node2_to_jem_bag]
 
 With several scenarios (the demo) the legs fly one after the other in the same graph, the
 simulation reset to each leg's scenario (/sim/reset) before it. Exit status: 0 when every leg
 succeeded, 1 when one failed, 2 for a bad argument, 130 when interrupted (SIGINT/SIGTERM).
-The launch description runs it as one of its processes (see astrobee/launch/cargo_transport.py).
+The launch description runs it as one of its processes (see astrobee_bringup/launch/cargo_transport.py).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ import numpy as np
 
 from astrobee import config, flight_modes
 from astrobee import rotations as rot
-from astrobee import summary as sm
+from astrobee_bringup import summary as sm
 
 # MotionState values (astrobee_msgs/MotionState)
 IDLE, STOPPED, STOPPING, CONTROLLING = 1, 2, 4, 9
