@@ -58,7 +58,7 @@ class Simulation:
                  bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, robots: list[str] | None = None,
                  flight_mode: str | None = None, wall_thickness: float | None = None,
-                 wall_bodies: int = 64):
+                 wall_bodies: int = 64, fem_solver: str | None = None):
         import pybullet as p
         self.p = p
         self.client = p.connect(p.GUI if gui else p.DIRECT)
@@ -71,7 +71,7 @@ class Simulation:
         self.wall_bodies = wall_bodies
         self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
                           "bag_resolution": bag_resolution, "robots": robots,
-                          "flight_mode": flight_mode}
+                          "flight_mode": flight_mode, "fem_solver": fem_solver}
         self.watchdog_timeout = float(config.astrobee().get("watchdog_timeout", 0.32))
         self._half_envelope = float(config.astrobee().get("envelope", 0.32)) / 2
         self.robots: dict[str, Robot] = {}
@@ -105,6 +105,8 @@ class Simulation:
             bag_cfg["variant"] = o["bag_variant"]
         if bag_cfg and o.get("bag_resolution"):
             bag_cfg["resolution"] = int(o["bag_resolution"])
+        if bag_cfg and o.get("fem_solver"):
+            bag_cfg["solver"] = o["fem_solver"]
         mode = o.get("flight_mode") or sc.get("flight_mode")
         try:
             flight_modes.get(mode)
@@ -131,7 +133,8 @@ class Simulation:
         # ---- build -----------------------------------------------------------------------
         p, c = self.p, self.client
         fem = bag_cfg.get("model") == "fem"
-        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD if fem else 0, physicsClientId=c)
+        soft = fem and bag_cfg.get("solver", "bullet") == "bullet"   # a pybullet soft body
+        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD if soft else 0, physicsClientId=c)
         p.setGravity(0, 0, 0, physicsClientId=c)
         p.setTimeStep(self.dt, physicsClientId=c)
         if self.gui:
@@ -139,7 +142,7 @@ class Simulation:
         # soft bodies collide properly only with plain convex shapes: compound walls let FEM
         # nodes sink through (measured); the rigid models get the cheaper compounds
         self.wall_ids = build_pybullet(self.world, c, visuals=self.gui,
-                                       per_body=1 if fem else self.wall_bodies)
+                                       per_body=1 if soft else self.wall_bodies)
         self._wall_set = frozenset(self.wall_ids)
         rng = np.random.default_rng(seed)
         noise = float(sc.get("initial_position_noise", 0.0))
@@ -156,6 +159,8 @@ class Simulation:
             kw = {k: bag_cfg[k] for k in ("size", "mass") if k in bag_cfg}
             if fem and "resolution" in bag_cfg:
                 kw["resolution"] = int(bag_cfg["resolution"])
+            if fem:
+                kw["solver"] = bag_cfg.get("solver", "bullet")
             self.bag = make_bag(bag_cfg.get("model", "rigid"), c, bag_cfg.get("variant", "front"), **kw)
             self.bag.attach(list(self.robots.values()))
         if self.gui:
@@ -207,6 +212,8 @@ class Simulation:
                 elif fault[name]:
                     fault[name] = False
                 r.apply()
+            if bag is not None:
+                bag.before_step(self.dt)
             step_sim(physicsClientId=c)
             self.time += self.dt
             self.steps += 1
