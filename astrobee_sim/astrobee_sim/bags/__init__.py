@@ -4,12 +4,21 @@ from __future__ import annotations
 from .base import VARIANTS, Bag, BagError, BagState, handle_dirs
 
 MODELS = ("fem", "constraint", "composite", "rigid")
+FEM_SOLVERS = ("bullet", "fast")
 
 
 def make_bag(model: str, client: int, variant: str = "front", **kw) -> Bag:
-    """Build a bag model in a pybullet client (fem needs a deformable-world client)."""
+    """Build a bag model in a pybullet client.
+
+    fem takes `solver`: "bullet" (pybullet's soft body, the reference; needs a deformable-world
+    client) or "fast" (the same tet mesh integrated by fem_fast, outside pybullet)."""
     handle_dirs(variant)   # raises BagError for an unknown variant
-    if model == "fem":
+    solver = kw.pop("solver", None) or "bullet"
+    if model == "fem" and solver not in FEM_SOLVERS:
+        raise BagError(f"unknown fem solver {solver!r}; known: {', '.join(FEM_SOLVERS)}")
+    if model == "fem" and solver == "fast":
+        from .fem_fast import FastFemBag as cls
+    elif model == "fem":
         from .fem import FemBag as cls
     elif model == "constraint":
         from .constraint import ConstraintBag as cls
@@ -22,4 +31,4 @@ def make_bag(model: str, client: int, variant: str = "front", **kw) -> Bag:
     return cls(client, variant, **kw)
 
 
-__all__ = ["Bag", "BagError", "BagState", "MODELS", "VARIANTS", "handle_dirs", "make_bag"]
+__all__ = ["Bag", "BagError", "BagState", "FEM_SOLVERS", "MODELS", "VARIANTS", "handle_dirs", "make_bag"]

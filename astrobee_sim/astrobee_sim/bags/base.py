@@ -151,6 +151,10 @@ class Bag(ABC):
     @abstractmethod
     def restore(self, snap) -> None: ...
 
+    def before_step(self, dt: float) -> None:
+        """Called before every physics step (a bag integrated outside pybullet applies its
+        reaction forces on the robots here)."""
+
     def after_step(self, dt: float, sample: bool = True) -> None:
         """Called after every physics step."""
 
