@@ -1,6 +1,6 @@
 """The controller's mobility state machine around the PD law: follow a segment, stop and hold.
 
-Transport-free: pd_controller_node feeds it states and segments and publishes what it returns.
+Transport-free: the PD ControlLaw (law.py) that controller_node drives.
 MotionState values follow NASA ff_msgs/MotionState. Life cycle:
     IDLE (no command yet; zero wrench)  --first state (hold_on_start)-->  STOPPED (hold pose)
     any  --segment-->  CONTROLLING (track it)  --end of segment-->  STOPPING (hold final pose
@@ -16,6 +16,7 @@ import numpy as np
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
+from .law import BagObservation, carried_mass
 from .mass import MassProperties
 from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdTracker, Reference, State
 from .reference import SampledTrajectory
@@ -38,14 +39,21 @@ class Step:
     control_mode: int
     state: int
     event: str  # non-empty when the state changed this tick (why)
+    candidates: np.ndarray | None = None   # (N, T, 3) positions a sampling law considered
+    chosen: np.ndarray | None = None       # (T, 3) positions of the candidate it executes
 
 
 class Tracker:
-    """Segment follower: a PdTracker plus the IDLE/CONTROLLING/STOPPING/STOPPED logic."""
+    """Segment follower: a PdTracker plus the IDLE/CONTROLLING/STOPPING/STOPPED logic (the PD
+    ControlLaw)."""
+
+    name = "pd"
 
     def __init__(self, flight_mode: FlightMode, mass: MassProperties, settle_time: float = 5.0,
                  hold_on_start: bool = True) -> None:
         self.pd = PdTracker(flight_mode, mass)
+        self.robot_mass = mass
+        self.carrying = False
         self.settle_time = settle_time
         self.hold_on_start = hold_on_start
         self.state = IDLE
@@ -63,7 +71,14 @@ class Tracker:
         self.pd.set_flight_mode(mode)
 
     def set_mass(self, mass: MassProperties) -> None:
+        """The robot's own mass properties (a carried bag is added by observe_bag)."""
+        self.robot_mass = mass
         self.pd.set_mass(mass)
+
+    def observe_bag(self, bag: BagObservation | None, robot: State | None) -> None:
+        """Feed-forward with the rigidly held bag's mass and inertia while it is attached."""
+        self.carrying = bag is not None and bag.attached and robot is not None
+        self.pd.set_mass(carried_mass(self.robot_mass, bag, robot))
 
     def _transition(self, state: int, event: str) -> None:
         self.state = state

@@ -1,0 +1,289 @@
+"""The typed scenario: loaded, validated and overridden once, then handed to every consumer.
+
+A scenario (config/scenarios/NAME.yaml) says which robots start where, in which flight mode,
+carrying which cargo bag, going where. The launcher validates it with its overrides before it
+starts a process; the simulator builds it and publishes it (latched /sim/scenario) so the
+controller and the mission read the bag and the goal from the graph, not from files of their
+own. Names are restricted to the scenario folder (no paths, no '..').
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import yaml
+
+from . import config, flight_modes
+
+BAG_MODELS = ("fem", "constraint", "composite", "rigid")
+FEM_SOLVERS = ("bullet", "fast")
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_\-]{0,63}$")
+MAX_ROBOTS = 4
+RESOLUTION_RANGE = (27, 5000)          # FEM target node count accepted
+MASS_RANGE = (0.05, 100.0)             # kg
+
+
+class ScenarioError(ValueError):
+    """A scenario that does not exist or cannot be built; the message says which and why."""
+
+
+def bag_variants() -> tuple[str, ...]:
+    return tuple(config.bags()["handles"])
+
+
+def _vec(value: Any, n: int, what: str) -> tuple[float, ...]:
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{what} must be {n} numbers, got {value!r}") from None
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise ScenarioError(f"{what} must be {n} finite numbers, got {value!r}")
+    return tuple(float(x) for x in arr)
+
+
+def _quat(value: Any, what: str) -> tuple[float, ...]:
+    q = np.asarray(_vec(value, 4, what))
+    n = float(np.linalg.norm(q))
+    if n < 1e-6:
+        raise ScenarioError(f"{what} must be a non-zero quaternion [x, y, z, w]")
+    return tuple(float(x) for x in q / n)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """One Astrobee: namespace name ('' = the default robot) and start pose."""
+
+    name: str
+    position: tuple[float, float, float]
+    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class BagSpec:
+    """The cargo bag: model fidelity, handle variant, size (m), mass (kg), FEM resolution/solver."""
+
+    model: str = "rigid"
+    variant: str = "front"
+    size: tuple[float, float, float] = (0.50, 0.42, 0.25)
+    mass: float = 10.0
+    resolution: int = 0            # FEM target node count; 0 = bags.yaml's
+    solver: str = "bullet"         # FEM solver: bullet (reference) | fast
+
+    def validate(self) -> None:
+        if self.model not in BAG_MODELS:
+            raise ScenarioError(f"unknown bag model {self.model!r}; known: {', '.join(BAG_MODELS)}")
+        if self.variant not in bag_variants():
+            raise ScenarioError(f"unknown bag variant {self.variant!r}; known: "
+                                f"{', '.join(bag_variants())}")
+        if self.solver not in FEM_SOLVERS:
+            raise ScenarioError(f"unknown fem solver {self.solver!r}; known: {', '.join(FEM_SOLVERS)}")
+        if not all(0.05 <= s <= 2.0 for s in self.size):
+            raise ScenarioError(f"bag size must be 0.05..2 m per side, got {list(self.size)}")
+        if not MASS_RANGE[0] <= self.mass <= MASS_RANGE[1]:
+            raise ScenarioError(f"bag mass must be {MASS_RANGE[0]}..{MASS_RANGE[1]} kg, got {self.mass}")
+        if self.resolution and not RESOLUTION_RANGE[0] <= self.resolution <= RESOLUTION_RANGE[1]:
+            raise ScenarioError(f"bag resolution must be {RESOLUTION_RANGE[0]}..{RESOLUTION_RANGE[1]} "
+                                f"nodes, got {self.resolution}")
+
+    @property
+    def handles(self) -> int:
+        return len(config.bags()["handles"][self.variant])
+
+    def as_dict(self) -> dict[str, Any]:
+        d = {"model": self.model, "variant": self.variant, "size": list(self.size), "mass": self.mass}
+        if self.resolution:
+            d["resolution"] = self.resolution
+        if self.model == "fem":
+            d["solver"] = self.solver
+        return d
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario (see the module docstring)."""
+
+    name: str
+    description: str = ""
+    flight_mode: str = "nominal"
+    robots: tuple[RobotSpec, ...] = ()
+    bag: BagSpec | None = None
+    goal_position: tuple[float, float, float] | None = None
+    goal_orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    face_forward: bool = False
+    carry_extent_m: float | None = None     # planning margin for the carried bag (None: bags.yaml)
+    initial_position_noise: float = 0.0
+    extra: dict = field(default_factory=dict, compare=False)   # keys we do not interpret
+
+    # ---- loading --------------------------------------------------------------------------
+    @classmethod
+    def load(cls, name: str, **overrides: Any) -> "Scenario":
+        """config/scenarios/<name>.yaml, validated, with launch/parameter overrides applied."""
+        check_name(name)
+        try:
+            data = config.scenario(name)
+        except config.ConfigError as exc:
+            raise ScenarioError(str(exc)) from None
+        return cls.from_dict(data, name).override(**overrides)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], name: str = "custom") -> "Scenario":
+        if not isinstance(data, dict):
+            raise ScenarioError(f"scenario {name!r} must be a mapping")
+        mode = data.get("flight_mode") or "nominal"
+        try:
+            flight_modes.get(mode)
+        except flight_modes.UnknownFlightMode as exc:
+            raise ScenarioError(str(exc)) from None
+        raw_robots = data.get("robots")
+        if raw_robots is None:
+            raw_robots = [{"name": "", "position": config.waypoint("node_2").tolist()}]
+        if not isinstance(raw_robots, list) or not raw_robots:
+            raise ScenarioError(f"scenario {name!r}: robots must be a non-empty list, got {raw_robots!r}")
+        if len(raw_robots) > MAX_ROBOTS:
+            raise ScenarioError(f"scenario {name!r}: at most {MAX_ROBOTS} robots")
+        robots = []
+        for i, rc in enumerate(raw_robots):
+            if not isinstance(rc, dict):
+                raise ScenarioError(f"scenario {name!r}: robot {i} must be a mapping, got {rc!r}")
+            rname = str(rc.get("name", "") or "")
+            if rname and not _NAME.match(rname):
+                raise ScenarioError(f"robot name {rname!r} is not a valid namespace")
+            robots.append(RobotSpec(rname, _vec(rc.get("position"), 3, f"robot {i} position"),
+                                    _quat(rc.get("orientation", [0, 0, 0, 1]), f"robot {i} orientation")))
+        if len({r.name for r in robots}) != len(robots):
+            raise ScenarioError(f"scenario {name!r}: robot names must differ")
+        bag = None
+        raw_bag = data.get("bag")
+        if raw_bag:
+            if not isinstance(raw_bag, dict):
+                raise ScenarioError(f"scenario {name!r}: bag must be a mapping or null")
+            default = config.bags()["default"]
+            bag = BagSpec(str(raw_bag.get("model", default.get("model", "rigid"))),
+                          str(raw_bag.get("variant", default.get("variant", "front"))),
+                          _vec(raw_bag.get("size", default["size"]), 3, "bag size"),
+                          float(raw_bag.get("mass", default["mass"])),
+                          int(raw_bag.get("resolution", 0) or 0),
+                          str(raw_bag.get("solver", "bullet")))
+            bag.validate()
+            if bag.handles != len(robots) and bag.handles == 2 and len(robots) == 1:
+                pass   # a two-handle bag held by one robot: the second handle hangs free
+        goal = data.get("goal") or {}
+        gp = _vec(goal["position"], 3, "goal position") if goal.get("position") is not None else None
+        gq = _quat(goal.get("orientation", [0, 0, 0, 1]), "goal orientation")
+        known = {"description", "flight_mode", "robots", "bag", "goal", "face_forward",
+                 "carry_extent", "initial_position_noise", "name"}
+        ce = data.get("carry_extent")
+        noise = float(data.get("initial_position_noise", 0.0) or 0.0)
+        if not 0 <= noise <= 0.5:
+            raise ScenarioError(f"initial_position_noise must be 0..0.5 m, got {noise}")
+        return cls(name=name, description=str(data.get("description", "")), flight_mode=mode,
+                   robots=tuple(robots), bag=bag, goal_position=gp, goal_orientation=gq,
+                   face_forward=bool(data.get("face_forward", False)),
+                   carry_extent_m=None if ce is None else float(ce),
+                   initial_position_noise=noise,
+                   extra={k: v for k, v in data.items() if k not in known})
+
+    def override(self, bag_model: str | None = None, bag_variant: str | None = None,
+                 bag_resolution: int | None = None, bag_mass: float | None = None,
+                 fem_solver: str | None = None, robots: list[str] | None = None,
+                 flight_mode: str | None = None) -> "Scenario":
+        """The scenario with launch/parameter overrides applied (empty/None: keep), validated.
+
+        bag_model 'none' removes the bag; a bag model given to a scenario without a bag adds the
+        default bag (config/bags.yaml) with that model."""
+        sc = self
+        if flight_mode:
+            try:
+                flight_modes.get(flight_mode)
+            except flight_modes.UnknownFlightMode as exc:
+                raise ScenarioError(str(exc)) from None
+            sc = replace(sc, flight_mode=flight_mode)
+        bag = sc.bag
+        if bag_model == "none":
+            bag = None
+        elif bag_model:
+            if bag is None:
+                d = config.bags()["default"]
+                bag = BagSpec(variant=str(d.get("variant", "front")), size=_vec(d["size"], 3, "bag size"),
+                              mass=float(d["mass"]))
+            bag = replace(bag, model=bag_model)
+        if bag is not None:
+            if bag_variant:
+                bag = replace(bag, variant=bag_variant)
+            if bag_resolution:
+                bag = replace(bag, resolution=int(bag_resolution))
+            if bag_mass:
+                bag = replace(bag, mass=float(bag_mass))
+            if fem_solver:
+                bag = replace(bag, solver=fem_solver)
+            bag.validate()
+        elif bag_variant or bag_resolution or bag_mass or fem_solver:
+            pass    # nothing to apply them to; harmless
+        sc = replace(sc, bag=bag)
+        if robots:
+            names = [str(r).strip() for r in robots]
+            if len(names) > MAX_ROBOTS or len(set(names)) != len(names):
+                raise ScenarioError(f"robots must be 1..{MAX_ROBOTS} distinct names, got {names}")
+            for n in names:
+                if n and not _NAME.match(n):
+                    raise ScenarioError(f"robot name {n!r} is not a valid namespace")
+            base = sc.robots[0]
+            specs = [replace(sc.robots[i], name=n) if i < len(sc.robots) else
+                     RobotSpec(n, tuple(float(x) for x in np.add(base.position, [0.7 * i, 0, 0])),
+                               base.orientation)
+                     for i, n in enumerate(names)]
+            sc = replace(sc, robots=tuple(specs))
+        return sc
+
+    # ---- facts ----------------------------------------------------------------------------
+    @property
+    def carrying_bag(self) -> bool:
+        return self.bag is not None
+
+    @property
+    def carry_extent(self) -> float:
+        """Extra planning clearance for the carried bag (m): the scenario's, else bags.yaml's."""
+        if self.bag is None:
+            return 0.0
+        if self.carry_extent_m is not None:
+            return float(self.carry_extent_m)
+        return float(config.bags().get("carry_extent", 0.0))
+
+    @property
+    def robot_names(self) -> list[str]:
+        return [r.name for r in self.robots]
+
+    def as_dict(self) -> dict[str, Any]:
+        """The scenario as YAML-able data (what /sim/scenario carries in full)."""
+        d: dict[str, Any] = dict(self.extra)
+        d.update({"name": self.name, "description": self.description,
+                  "flight_mode": self.flight_mode,
+                  "robots": [{"name": r.name, "position": list(r.position),
+                              "orientation": list(r.orientation)} for r in self.robots],
+                  "bag": None if self.bag is None else self.bag.as_dict(),
+                  "face_forward": self.face_forward,
+                  "initial_position_noise": self.initial_position_noise})
+        if self.goal_position is not None:
+            d["goal"] = {"position": list(self.goal_position),
+                         "orientation": list(self.goal_orientation)}
+        if self.carry_extent_m is not None:
+            d["carry_extent"] = self.carry_extent_m
+        return d
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(self.as_dict(), sort_keys=False)
+
+
+def check_name(name: str) -> str:
+    """A scenario name: letters, digits, '_' and '-' only (no paths: the folder is fixed)."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ScenarioError(f"scenario name must be letters, digits, '_' or '-' (a file of "
+                            f"config/scenarios/), got {name!r}")
+    return name
+
+
+def known() -> list[str]:
+    """Names of the scenarios in config/scenarios/."""
+    return sorted(p.stem for p in (config.config_dir() / "scenarios").glob("*.yaml"))
