@@ -1,14 +1,27 @@
 """The shared body of a node executable's main(): build the node, spin until Ctrl-C, clean up."""
 from __future__ import annotations
 
+import os
 import sys
 from typing import Any, Callable
 
 
-def run(factory: Callable[[list[str]], Any], argv: list[str] | None = None) -> int:
-    """Build `factory(argv)` (an object holding a roszen Node as `.node`) and spin it."""
+def run(factory: Callable[[list[str]], Any], argv: list[str] | None = None,
+        errors: tuple[type[BaseException], ...] = (ValueError,)) -> int:
+    """Build `factory(argv)` (an object holding a roszen Node as `.node`) and spin it.
+
+    An exception of `errors` while building (a bad parameter) ends the program with one line
+    naming the executable and the cause, exit code 2, no traceback; the half-built node's
+    sessions are closed so the process does not hang on zenoh's threads."""
     argv = sys.argv if argv is None else argv
-    wrapper = factory(argv)
+    try:
+        wrapper = factory(argv)
+    except errors as exc:
+        prog = os.path.basename(argv[0]) if argv else "node"
+        print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
+        from . import context
+        context.shutdown()
+        return 2
     try:
         wrapper.node.spin()
     except KeyboardInterrupt:

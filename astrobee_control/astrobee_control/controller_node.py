@@ -1,0 +1,337 @@
+"""controller_node: any ControlLaw (law.py) wired to the graph; the PD and MPC nodes are a few
+lines on top of it.
+
+Subscribes <ns>/gnc/ekf (default; or loc/truth/pose + loc/truth/twist with state_source:=truth),
+<ns>/gnc/ctl/segment (latched), <ns>/mob/flight_mode (latched), /sim/bag/state and /sim/scenario
+(latched: the carried bag's mass and size, unless the bag_mass / bag_size parameters say
+otherwise). Publishes <ns>/gnc/ctl/command (FamCommand, BODY-frame wrench), <ns>/gnc/ctl/traj
+(the reference, ControlState), <ns>/mob/state (MotionState, latched, on change and at 1 Hz) and,
+for laws that sample candidates, <ns>/gnc/ctl/candidates (MarkerArray: the candidates and the
+chosen one). Service <ns>/gnc/ctl/stop (std_srvs/Trigger): hold the current pose.
+
+One command per state sample, stamped with the state's stamp: at 62.5 Hz when the sim
+publishes at 62.5 Hz, on sim time in every clock mode (in lockstep the sim waits for it).
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from astrobee import flight_modes
+from astrobee import msgconv as mc
+from astrobee import rotations as rot
+from astrobee.flight_modes import FlightMode
+from roszen import node_main
+
+from . import mass as mp
+from .law import BagObservation, ControlLaw
+from .mass import MassProperties
+from .pd import State
+from .reference import from_control_states
+
+JUMP_DISTANCE = 0.5  # m between two state samples: a reset, not motion
+LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]
+
+# parameters every controller node declares (name -> default)
+COMMON_PARAMETERS: dict[str, Any] = {
+    "state_source": "ekf",          # ekf | truth
+    "flight_mode": "",              # "" = nominal until /mob/flight_mode says otherwise
+    "bag_mass": -1.0,               # kg; < 0 = the scenario's (from /sim/scenario)
+    "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
+    "truth_omega_frame": "world",   # frame of loc/truth/twist's angular velocity: world | body
+    "candidates_rate": 2.0,         # Hz at most for /gnc/ctl/candidates (0: never)
+}
+
+
+class ControllerNode:
+    """Wiring of one ControlLaw to topics; callbacks never raise (bad samples are logged and
+    dropped)."""
+
+    def __init__(self, make_law: LawFactory, node_name: str, parameters: dict[str, Any] | None = None,
+                 argv: list[str] | None = None) -> None:
+        import roszen
+        from roszen import LATCHED
+
+        self.roszen = roszen
+        self.node = n = roszen.Node(node_name, argv=argv)
+        self.log = n.get_logger()
+        values = {name: n.declare_parameter(name, default).value
+                  for name, default in {**COMMON_PARAMETERS, **(parameters or {})}.items()}
+        self.state_source = str(values["state_source"])
+        if self.state_source not in ("ekf", "truth"):
+            raise ValueError(f"state_source must be ekf or truth, not {self.state_source!r}")
+        self.truth_omega_frame = str(values["truth_omega_frame"])
+        if self.truth_omega_frame not in ("world", "body"):
+            raise ValueError(f"truth_omega_frame must be world or body, not {self.truth_omega_frame!r}")
+        self.bag_mass_param = float(values["bag_mass"])
+        size = list(values["bag_size"])
+        self.bag_size_param = np.asarray(size, float) if len(size) == 3 and all(s > 0 for s in size) \
+            else None
+        rate = float(values["candidates_rate"])
+        self.candidates_period = 1.0 / rate if rate > 0 else float("inf")
+        mode = flight_modes.get(str(values["flight_mode"]) or None)
+        law_params = {k: values[k] for k in (parameters or {})}
+        self.law: ControlLaw = make_law(mode, mp.robot(), law_params)
+        self.scenario_bag: tuple[float, np.ndarray] | None = None   # (mass, size) from /sim/scenario
+        self._last_stamp: float | None = None
+        self._last_state: State | None = None
+        self._last_segment_key: tuple[int, int] | None = None
+        self._pending: dict[str, dict[tuple[int, int], Any]] = {"pose": {}, "twist": {}}
+        self._last_mob_pub = -1e9
+        self._last_candidates = -1e9
+        self._carrying = False
+
+        M = roszen.message_class
+        self.FamCommand, self.ControlState = M("astrobee_msgs/msg/FamCommand"), M("astrobee_msgs/msg/ControlState")
+        self.MotionState = M("astrobee_msgs/msg/MotionState")
+        self.MarkerArray, self.Marker = M("visualization_msgs/msg/MarkerArray"), M("visualization_msgs/msg/Marker")
+        self.Point = M("geometry_msgs/msg/Point")
+        self.pub_cmd = n.create_publisher("astrobee_msgs/msg/FamCommand", mc.COMMAND, 10)
+        self.pub_traj = n.create_publisher("astrobee_msgs/msg/ControlState", mc.TRAJ, 10)
+        self.pub_mob = n.create_publisher("astrobee_msgs/msg/MotionState", mc.MOB_STATE, LATCHED)
+        self.pub_cand = n.create_publisher("visualization_msgs/msg/MarkerArray", mc.CANDIDATES, 2)
+        n.create_subscription("astrobee_msgs/msg/Segment", mc.SEGMENT, self._on_segment, LATCHED)
+        n.create_subscription("astrobee_msgs/msg/FlightMode", mc.FLIGHT_MODE, self._on_flight_mode, LATCHED)
+        n.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
+        n.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO, self._on_scenario, LATCHED)
+        if self.state_source == "truth":
+            n.create_subscription("geometry_msgs/msg/PoseStamped", mc.POSE,
+                                  lambda m: self._pair("pose", m), 10)
+            n.create_subscription("geometry_msgs/msg/TwistStamped", mc.TWIST,
+                                  lambda m: self._pair("twist", m), 10)
+        else:
+            n.create_subscription("astrobee_msgs/msg/EkfState", mc.EKF, self._on_ekf, 10)
+        self.Trigger = roszen.response_class("std_srvs/srv/Trigger")
+        n.create_service("std_srvs/srv/Trigger", mc.CTL_STOP, self._on_stop)
+        self._publish_mob("", force=True)
+        self.log.info(f"{self.law.name} controller up: flight mode {self.law.flight_mode.name}, "
+                      f"state from {self.state_source}")
+
+    # ---- inputs -----------------------------------------------------------------------
+    def _on_scenario(self, msg: Any) -> None:
+        try:
+            if msg.carrying_bag:
+                size = mc.vec(msg.bag_size)
+                if not (np.isfinite(msg.bag_mass) and msg.bag_mass > 0 and np.all(size > 0)):
+                    raise ValueError(f"bag mass {msg.bag_mass} / size {size.tolist()}")
+                self.scenario_bag = (float(msg.bag_mass), size)
+                self.log.info(f"scenario {msg.name}: carrying a {msg.bag_model} bag of "
+                              f"{msg.bag_mass:.1f} kg")
+            else:
+                self.scenario_bag = None
+        except (AttributeError, TypeError, ValueError) as exc:
+            self.log.warn(f"bad scenario description dropped: {exc}")
+
+    def _bag_figures(self) -> tuple[float, np.ndarray] | None:
+        """Mass and size of the carried bag: parameters when set, else the scenario's."""
+        base = self.scenario_bag
+        mass = self.bag_mass_param if self.bag_mass_param > 0 else (base[0] if base else None)
+        size = self.bag_size_param if self.bag_size_param is not None else (base[1] if base else None)
+        if mass is None or size is None:
+            return None
+        return mass, size
+
+    def _on_segment(self, msg: Any) -> None:
+        try:
+            key = mc.stamp_key(msg.header.stamp)
+            if key == self._last_segment_key and key != (0, 0):
+                return  # latched redelivery of the segment we already follow
+            traj = from_control_states(msg.segment)
+            if msg.flight_mode:
+                self.law.set_flight_mode(flight_modes.get(msg.flight_mode))
+        except (ValueError, AttributeError, TypeError) as exc:
+            self.log.error(f"segment rejected: {exc}")
+            self._publish_mob(f"segment rejected: {exc}", force=True)
+            return
+        self._last_segment_key = key
+        now = self._last_stamp if self._last_stamp is not None else self._now()
+        self.law.follow(traj, now)
+        self.log.info(f"following a segment of {len(msg.segment)} states, {traj.duration:.1f} s")
+
+    def _on_flight_mode(self, msg: Any) -> None:
+        try:
+            self.law.set_flight_mode(flight_modes.get(msg.name))
+            self.log.info(f"flight mode {msg.name}")
+        except flight_modes.UnknownFlightMode as exc:
+            self.log.error(str(exc))
+
+    def _on_bag(self, msg: Any) -> None:
+        try:
+            attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
+            figures = self._bag_figures()
+            state = self._last_state
+            if not attached or state is None or figures is None:
+                if self._carrying:
+                    self.law.observe_bag(None, state)
+                    self._carrying = False
+                    self.log.info("bag released: robot mass only")
+                return
+            p_bag, q_bag = mc.pose(msg.pose)
+            if not (np.all(np.isfinite(p_bag)) and np.all(np.isfinite(q_bag))):
+                raise ValueError("non-finite bag pose")
+            obs = BagObservation(p_bag, rot.normalize(q_bag), mc.vec(msg.velocity), mc.vec(msg.omega),
+                                 True, figures[0], figures[1], str(msg.model))
+            self.law.observe_bag(obs, state)
+            if not self._carrying:
+                offset, _ = obs.offset_in(state)
+                self.log.info(f"bag attached: {figures[0]:.1f} kg at "
+                              f"{np.round(offset, 3).tolist()} m (body frame)")
+            self._carrying = True
+        except (ValueError, AttributeError, TypeError) as exc:
+            self.log.warn(f"bad bag state dropped: {exc}")
+
+    def _on_ekf(self, msg: Any) -> None:
+        try:
+            state = State(mc.vec(msg.pose.position), mc.vec(msg.velocity),
+                          mc.quat(msg.pose.orientation), mc.vec(msg.omega))
+        except (AttributeError, TypeError) as exc:
+            self.log.warn(f"bad EKF state dropped: {exc}")
+            return
+        self._control(state, msg.header.stamp)
+
+    def _pair(self, kind: str, msg: Any) -> None:
+        """Pose and twist of one stamp make one state (either may come first)."""
+        other_kind = "twist" if kind == "pose" else "pose"
+        mine, other = self._pending[kind], self._pending[other_kind]
+        key = mc.stamp_key(msg.header.stamp)
+        if key not in other:
+            mine[key] = msg
+            if len(mine) > 20:
+                del mine[min(mine)]
+            return
+        peer = other.pop(key)
+        pose, twist = (msg, peer) if kind == "pose" else (peer, msg)
+        for d in (mine, other):
+            for old in [k for k in d if k < key]:
+                del d[old]
+        try:
+            q = mc.quat(pose.pose.orientation)
+            omega = mc.vec(twist.twist.angular)
+            if self.truth_omega_frame == "world":
+                omega = rot.rotate_inverse(q, omega)
+            state = State(mc.vec(pose.pose.position), mc.vec(twist.twist.linear), q, omega)
+        except (AttributeError, TypeError, ValueError) as exc:
+            self.log.warn(f"bad truth state dropped: {exc}")
+            return
+        self._control(state, pose.header.stamp)
+
+    def _on_stop(self, req: Any) -> Any:
+        resp = self.Trigger()
+        if self._last_state is None:
+            resp.success, resp.message = False, "no state received yet: nothing to stop"
+            return resp
+        self.law.stop(self._last_state, self._last_stamp or 0.0)
+        resp.success, resp.message = True, "stopping: holding the current pose"
+        self.log.info("stop requested")
+        return resp
+
+    # ---- control ----------------------------------------------------------------------
+    def _now(self) -> float:
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def _control(self, state: State, stamp: Any) -> None:
+        vals = np.concatenate([state.position, state.velocity, state.orientation, state.omega])
+        if not np.all(np.isfinite(vals)) or np.linalg.norm(state.orientation) < 1e-6:
+            self.log.warn("non-finite state dropped")
+            return
+        state.orientation = rot.normalize(state.orientation)
+        t = mc.stamp_s(stamp)
+        last = self._last_state
+        if last is not None and self._last_stamp is not None and (
+                t < self._last_stamp - 1e-6
+                or float(np.linalg.norm(state.position - last.position)) > JUMP_DISTANCE):
+            self.law.rehold(state, "state jumped (simulation reset?): holding the new pose")
+            self._last_segment_key = None
+        dt = 1.0 / 62.5 if self._last_stamp is None else min(max(t - self._last_stamp, 0.0), 0.1)
+        self._last_stamp, self._last_state = t, state
+        step = self.law.update(state, t, dt)
+        self._publish_command(step, stamp)
+        self._publish_traj(step, stamp)
+        self._publish_candidates(step, stamp, t)
+        self._publish_mob(step.event, force=bool(step.event))
+
+    def _publish_command(self, step: Any, stamp: Any) -> None:
+        out = step.output
+        m = self.FamCommand()
+        m.header.stamp = stamp
+        m.header.frame_id = "body"
+        mc.set_vec(m.wrench.force, out.force)
+        mc.set_vec(m.wrench.torque, out.torque)
+        mc.set_vec(m.accel, out.accel)
+        mc.set_vec(m.alpha, out.alpha)
+        m.status = 3 if out.saturated else 0
+        mc.set_vec(m.position_error, out.position_error)
+        mc.set_vec(m.position_error_integrated, out.position_error_integrated)
+        mc.set_vec(m.attitude_error, out.attitude_error)
+        mc.set_vec(m.attitude_error_integrated, out.attitude_error_integrated)
+        m.attitude_error_mag = out.attitude_error_mag
+        m.control_mode = step.control_mode
+        self.pub_cmd.publish(m)
+
+    def _publish_traj(self, step: Any, stamp: Any) -> None:
+        ref = step.reference
+        m = self.ControlState()
+        m.when = stamp
+        mc.set_pose(m.pose, ref.position, ref.orientation)
+        mc.set_vec(m.twist.linear, ref.velocity)
+        mc.set_vec(m.twist.angular, ref.omega)
+        mc.set_vec(m.accel.linear, ref.accel)
+        mc.set_vec(m.accel.angular, ref.alpha)
+        self.pub_traj.publish(m)
+
+    def _publish_candidates(self, step: Any, stamp: Any, t: float) -> None:
+        """The candidates a sampling law considered (grey) and the one it chose (green)."""
+        cands = getattr(step, "candidates", None)
+        if cands is None or t - self._last_candidates < self.candidates_period:
+            return
+        self._last_candidates = t
+        arr = self.MarkerArray()
+        chosen = getattr(step, "chosen", None)
+        lines = [(c, (0.6, 0.6, 0.6, 0.35), "candidates") for c in np.asarray(cands)]
+        if chosen is not None:
+            lines.append((np.asarray(chosen), (0.1, 0.9, 0.2, 1.0), "chosen"))
+        out = []
+        for i, (pts, colour, ns) in enumerate(lines):
+            m = self.Marker()
+            m.header.stamp, m.header.frame_id = stamp, "world"
+            m.ns, m.id, m.type, m.action = ns, i, 4, 0          # LINE_STRIP, ADD
+            m.pose.orientation.w = 1.0
+            m.scale.x = 0.01 if ns == "candidates" else 0.02
+            m.color.r, m.color.g, m.color.b, m.color.a = colour
+            pl = []
+            for p in pts[:: max(1, len(pts) // 50)]:
+                q = self.Point()
+                q.x, q.y, q.z = float(p[0]), float(p[1]), float(p[2])
+                pl.append(q)
+            m.points = pl
+            out.append(m)
+        arr.markers = out
+        self.pub_cand.publish(arr)
+
+    def _publish_mob(self, event: str, force: bool = False) -> None:
+        t = self._last_stamp if self._last_stamp is not None else 0.0
+        if not force and t - self._last_mob_pub < 1.0:
+            return
+        self._last_mob_pub = t
+        m = self.MotionState()
+        if self._last_stamp is not None:
+            mc.set_stamp(m.header.stamp, t)
+        law = self.law
+        m.state = law.state
+        m.fsm_event = event or law.segment_result
+        m.fsm_state = mc.MotionState.NAMES.get(law.state, str(law.state))
+        if law.segment_result:
+            m.fsm_state += f" {law.segment_result}"
+        self.pub_mob.publish(m)
+        if event:
+            self.log.info(f"{m.fsm_state}: {event}")
+
+
+def main(make_law: LawFactory, node_name: str, parameters: dict[str, Any] | None = None,
+         argv: list[str] | None = None) -> int:
+    """Entry point body of a controller executable: build the node around `make_law` and spin.
+
+    `parameters` (name -> default) are declared as ROS parameters and handed to make_law, which
+    raises ValueError with one line for bad values (the node then exits 1 with that line)."""
+    return node_main.run(lambda a: ControllerNode(make_law, node_name, parameters, a), argv)
