@@ -67,6 +67,26 @@ def jerk_cost_matrix(n: int) -> np.ndarray:
     return q
 
 
+def horner(coefficients: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Polynomials with monomial coefficients (M, n+1, d) (row j multiplies s^j), each at its own
+    parameter s (M,): (M, d)."""
+    c = np.asarray(coefficients, dtype=float)
+    s = np.asarray(s, dtype=float)[:, None]
+    out = c[:, -1].copy()
+    for j in range(c.shape[1] - 2, -1, -1):
+        out *= s
+        out += c[:, j]
+    return out
+
+
+@lru_cache(maxsize=None)
+def monomial_matrix(n: int, k: int = 0) -> np.ndarray:
+    """(n+1-k, n+1) matrix C with C @ P = monomial coefficients in s of d^k/ds^k of a degree-n curve."""
+    c = bernstein_power_matrix(n - k).T @ difference_matrix(n, k)
+    c.setflags(write=False)
+    return c
+
+
 def evaluate(points: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Curve values at parameters s in [0,1]; points (n+1, d) -> (len(s), d)."""
     points = np.asarray(points, dtype=float)

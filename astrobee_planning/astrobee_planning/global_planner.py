@@ -1,35 +1,28 @@
-"""Global planner: time-optimal, minimum-jerk piecewise Bezier spline through safe boxes.
+"""Global planner: near time-optimal, minimum-jerk piecewise Bezier spline through safe boxes.
 
-One Bezier segment (degree 7) per box of the route; every control point inside its box, so by
-the convex-hull property the whole segment is. Joints are continuous through the acceleration
-(C2): the controller feeds the reference acceleration forward as a force, so a C2 reference
-gives a continuous commanded force; a jerk step at a joint only changes the force's slope, and
-minimising the integrated squared jerk keeps those steps small.
+Geometry and timing are separated. For fixed segment durations T the spline is the solution of
+one convex QP (all three axes at once): minimum integrated squared jerk, every control point
+inside its segment's box (so by the convex hull the whole curve is), the boundary position,
+velocity and acceleration, and continuity through the jerk (C3) at the joints. No velocity or
+acceleration row is in the QP: box containment does not depend on time, so any solution can
+be slowed down uniformly until it meets the flight mode's limits, and that scale is computed
+from a tight bound on the NORMS of velocity and acceleration (the convex hull of the
+subdivided derivative curves), not a per-axis budget.
 
-Limits. The flight mode's limits are on the velocity and acceleration NORMS. We use a per-axis
-box on the control points of the derivative curves (a sufficient condition by the convex hull)
-with a per-segment split of the budget: |v_x| <= v sqrt(w_x), ... with w_x + w_y + w_z = 1,
-so the box lies inside the ball of radius v. The split follows the direction of travel of
-the segment (reference polyline leg), which in the axis-aligned ISS corridors gives ~0.96 v
-along the corridor instead of the uniform v/sqrt(3); it is refined from the solution's per-axis
-usage. The split makes the QP separable: three independent 1-D QPs (one per axis).
-
-Solver. The QP of each axis is built once per route (Clarabel, interior point) and retimed by
-`update` of the values of P and A (same sparsity pattern) and of b; no re-canonicalisation.
-OSQP (ADMM) was tried first and did not converge in 10,000 iterations on these problems (the
-1/T^5 jerk weights and the mm-scale acceleration rows make them badly conditioned), while the
-interior-point solver takes ~10-30 iterations and detects infeasibility reliably, which the
-time bisection depends on.
-
-Time minimisation: bisection on a global time scale (per axis; the plan's scale is the largest
-axis scale), then rounds of per-segment shrinking of the segments with slack and re-splitting
-the per-axis budgets, each followed by a new bisection; a round is kept only if the total
-duration drops.
+Timing: T starts from a trapezoidal speed profile along the reference polyline (with corner
+speeds from the turning angles), and a handful of retiming steps stretch or shrink each
+segment by its own limit usage; the best uniformly-scaled result is kept. Each step is one
+solve of the same QP, updated in place (Clarabel `update` of P, A and b on a fixed sparsity
+pattern, never re-canonicalised): 4-6 solves per route instead of a duration bisection.
+The time-optimality gap is reported against the trapezoidal lower bound on the shortest
+polyline through the route's boxes.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import lru_cache
+from math import comb
 
 import clarabel
 import numpy as np
@@ -39,12 +32,15 @@ from . import bezier
 from .boxes import NoRoute, OutsideSafeSet, SafeSet, safe_set
 
 DEGREE = 7
+CONTINUITY = 3          # derivatives continuous at the joints (3: jerk)
 BOX_EPS = 1e-6          # m, control points kept this far inside their box
-LIMIT_EPS = 1e-3        # relative margin on the limits inside the QP
-BUDGET_FLOOR = 0.03     # minimum share of the squared-norm budget an axis gets
-MAX_LEG = 1.0         # m: longer polyline legs are split into several segments in their box
-MAX_SPLIT = 6           # at most this many segments per box
-MAX_SEGMENTS = 20       # split no further than this many segments in all (planning time)
+MAX_LEG = 2.0           # m: cruise legs are split into segments at most this long
+CORNER_REACH = 1.0      # share of the shorter leg near a corner left free (the curve cuts it)
+DV_FRACTION = 0.34      # a segment changes speed by at most this share of v_max
+MAX_SEGMENTS = 40       # split no further than this many segments in all (QP size)
+RETIME_STEPS = 7        # retiming solves after the first (stops early without progress)
+TRACK_WEIGHT = 1.0      # pull of the straight-leg joints to the speed profile's points
+HULL_SPLITS = 2         # derivative curves subdivided 2^k times for the norm bound
 
 
 class PlanningError(RuntimeError):
@@ -75,138 +71,133 @@ class Spline:
         return idx, np.clip(s, 0.0, 1.0)
 
     def evaluate(self, t: np.ndarray, k: int = 0) -> np.ndarray:
-        """k-th time derivative at times t, shape (len(t), 3)."""
+        """k-th time derivative at times t, shape (len(t), 3) (vectorised over segments)."""
         idx, s = self.locate(t)
         n = self.points.shape[1] - 1
-        out = np.zeros((len(s), 3))
         if k > n:
-            return out
-        for seg in np.unique(idx):
-            m = idx == seg
-            cps = bezier.derivative_points(self.points[seg], self.durations[seg], k)
-            out[m] = bezier.evaluate(cps, s[m])
-        return out
+            return np.zeros((len(s), 3))
+        d = bezier.difference_matrix(n, k)                                  # (n+1-k, n+1)
+        coef = bezier.bernstein_power_matrix(n - k).T @ d                   # monomial rows
+        c = np.einsum("ij,sjk->sik", coef, self.points) / self.durations[:, None, None] ** k
+        return bezier.horner(c[idx], s)
 
     def scaled(self, factor: float) -> "Spline":
         """The same path slowed down by `factor` (durations times factor)."""
         return Spline(self.points.copy(), self.durations * factor, self.boxes.copy())
 
 
-class AxisQP:
-    """Minimum-jerk QP of one axis for a fixed box route, built once, retimed by updates.
+def _falling(n: int, k: int) -> float:
+    out = 1.0
+    for i in range(k):
+        out *= n - i
+    return out
 
-    Variables: control points x[s, i] (S segments, degree n). Equalities: boundary position,
-    velocity, acceleration; C0/C1/C2 at joints. Inequalities: box, velocity and acceleration
-    limits on the derivative control points (per segment)."""
 
-    # entry scale types (value = base * factor(type, k))
-    CONST, VEL, ACC, JA, JB, JA2, JB2 = range(7)
+class SplineQP:
+    """Minimum-jerk QP of the three axes for a fixed box route, built once, retimed by updates.
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray, degree: int = DEGREE):
-        self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
+    Variables x[ax, s, i] (3 axes, S segments, degree n). Equalities: boundary position,
+    velocity, acceleration; C0..C`continuity` at joints (rows scaled by the joint's mean
+    duration for conditioning). Inequalities: every control point inside its box."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, degree: int = DEGREE,
+                 continuity: int = CONTINUITY, joints: np.ndarray | None = None,
+                 track_weight: float = 0.0):
+        self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)    # (S, 3)
         self.S = S = len(self.lo)
         self.n = n = degree
         self.N = N = n + 1
-        self.nx = S * N
-        rows, cols, base, typ, key = [], [], [], [], []
+        self.c = c = continuity
+        self.nx = 3 * S * N
+        rows, cols, base, scl = [], [], [], []
         r = 0
-
-        def row(entries, t=0, k=0):
-            nonlocal r
-            for c, b in entries:
-                rows.append(r); cols.append(c); base.append(b); typ.append(t); key.append(k)
-            r += 1
-
-        ix = lambda s, i: s * N + i  # noqa: E731
-        L = S - 1
-        # equalities: boundary conditions
-        row([(ix(0, 0), 1.0)])
-        row([(ix(0, 1), 1.0), (ix(0, 0), -1.0)], self.VEL, 0)
-        row([(ix(0, 2), 1.0), (ix(0, 1), -2.0), (ix(0, 0), 1.0)], self.ACC, 0)
-        row([(ix(L, n), 1.0)])
-        row([(ix(L, n), 1.0), (ix(L, n - 1), -1.0)], self.VEL, L)
-        row([(ix(L, n), 1.0), (ix(L, n - 1), -2.0), (ix(L, n - 2), 1.0)], self.ACC, L)
-        # joints
-        for j in range(S - 1):
-            row([(ix(j, n), 1.0), (ix(j + 1, 0), -1.0)])
-            for c, b, t in ((ix(j, n), 1.0, self.JA), (ix(j, n - 1), -1.0, self.JA),
-                            (ix(j + 1, 1), -1.0, self.JB), (ix(j + 1, 0), 1.0, self.JB)):
-                rows.append(r); cols.append(c); base.append(b); typ.append(t); key.append(j)
-            r += 1
-            for c, b, t in ((ix(j, n), 1.0, self.JA2), (ix(j, n - 1), -2.0, self.JA2),
-                            (ix(j, n - 2), 1.0, self.JA2), (ix(j + 1, 2), -1.0, self.JB2),
-                            (ix(j + 1, 1), 2.0, self.JB2), (ix(j + 1, 0), -1.0, self.JB2)):
-                rows.append(r); cols.append(c); base.append(b); typ.append(t); key.append(j)
-            r += 1
+        ix = lambda ax, s, i: (ax * S + s) * N + i  # noqa: E731
+        for ax in range(3):
+            for end in (0, 1):                  # boundary rows: k-th difference = bc_k T^k / n!/(n-k)!
+                s = 0 if end == 0 else S - 1
+                for k in range(3):
+                    for i in range(k + 1):
+                        sign = (-1) ** (k - i) if end == 0 else (-1) ** i
+                        idx = i if end == 0 else n - i
+                        rows.append(r); cols.append(ix(ax, s, idx)); base.append(sign * comb(k, i)); scl.append(0)
+                    r += 1
+            for j in range(S - 1):
+                for k in range(c + 1):
+                    for i in range(k + 1):       # end of segment j ...
+                        rows.append(r); cols.append(ix(ax, j, n - i))
+                        base.append((-1) ** i * comb(k, i)); scl.append(0 if k == 0 else 1 + 2 * (j * c + k - 1))
+                    for i in range(k + 1):       # ... minus start of segment j+1
+                        rows.append(r); cols.append(ix(ax, j + 1, i))
+                        base.append(-((-1) ** (k - i)) * comb(k, i))
+                        scl.append(0 if k == 0 else 2 + 2 * (j * c + k - 1))
+                    r += 1
         self.n_eq = r
-        # inequalities A x <= b: box, velocity, acceleration (upper then lower)
         for sign in (1.0, -1.0):
-            for s in range(S):
-                for i in range(N):
-                    row([(ix(s, i), sign)])
-        self.r_vel = r
-        for sign in (1.0, -1.0):
-            for s in range(S):
-                for i in range(n):
-                    row([(ix(s, i + 1), sign), (ix(s, i), -sign)], self.VEL, s)
-        self.r_acc = r
-        for sign in (1.0, -1.0):
-            for s in range(S):
-                for i in range(n - 1):
-                    row([(ix(s, i + 2), sign), (ix(s, i + 1), -2 * sign), (ix(s, i), sign)], self.ACC, s)
+            for v in range(self.nx):
+                rows.append(r); cols.append(v); base.append(sign); scl.append(0)
+                r += 1
         self.m = r
         ids = np.arange(1, len(rows) + 1, dtype=float)
         a = sp.csc_matrix((ids, (rows, cols)), shape=(self.m, self.nx))
         a.sort_indices()
-        self._perm = a.data.astype(int) - 1
+        perm = a.data.astype(int) - 1
         self._a = a
-        self._base = np.array(base)
-        self._typ = np.array(typ)
-        self._key = np.array(key)
-        q = sp.block_diag([sp.csc_matrix(bezier.jerk_cost_matrix(n))] * S, format="csc")
-        pu = sp.triu(q, format="csc")
+        self._base = np.array(base, float)[perm]
+        self._scl = np.array(scl)[perm]
+        q = sp.block_diag([sp.csc_matrix(bezier.jerk_cost_matrix(n))] * (3 * S), format="csc")
+        # tracking: w |x(joint) - reference joint|^2 at the start of every segment but the first
+        self._q = np.zeros(self.nx)
+        diag = np.zeros(self.nx)
+        if joints is not None and track_weight > 0 and S > 1:
+            wt = track_weight * float(np.abs(bezier.jerk_cost_matrix(n)).max())
+            for ax in range(3):
+                for s in range(1, S):
+                    if not np.all(np.isfinite(joints[s])):
+                        continue            # NaN: this joint is free (a corner)
+                    diag[ix(ax, s, 0)] = wt
+                    self._q[ix(ax, s, 0)] = -wt * joints[s, ax]
+        pu = sp.triu(q + sp.diags(diag + 1e-30), format="csc")
         pu.sort_indices()
         self._p = pu
-        self._p_base = pu.data.copy()
-        self._p_seg = np.repeat(np.arange(self.nx), np.diff(pu.indptr)) // N
+        self._p_seg = (np.repeat(np.arange(self.nx), np.diff(pu.indptr)) // N) % S
+        rr = pu.indices
+        cc = np.repeat(np.arange(self.nx), np.diff(pu.indptr))
+        self._p_diag_track = np.where(rr == cc, diag[cc], 0.0)
+        self._p_base = pu.data.copy() - self._p_diag_track
+        lo_b = np.repeat(self.lo.T.reshape(-1) + BOX_EPS, N)
+        hi_b = np.repeat(self.hi.T.reshape(-1) - BOX_EPS, N)
+        self._box_b = np.concatenate([hi_b, -lo_b])
         self.solver: clarabel.DefaultSolver | None = None
         self.solves = 0
 
-    def _a_values(self, T: np.ndarray) -> np.ndarray:
-        n = self.n
-        f = np.ones(len(self._base))
-        t, k = self._typ, self._key
-        f = np.where(t == self.VEL, n / T[k], f)
-        f = np.where(t == self.ACC, n * (n - 1) / T[k] ** 2, f)
+    def _scales(self, T: np.ndarray) -> np.ndarray:
+        out = np.ones(1 + 2 * (self.S - 1) * self.c)
         if self.S > 1:
-            Ta, Tb = T[:-1], T[1:]
-            kj = np.minimum(k, self.S - 2)
-            w = 0.5 * (Ta + Tb)
-            f = np.where(t == self.JA, (w / Ta)[kj], f)
-            f = np.where(t == self.JB, (w / Tb)[kj], f)
-            f = np.where(t == self.JA2, ((w / Ta) ** 2)[kj], f)
-            f = np.where(t == self.JB2, ((w / Tb) ** 2)[kj], f)
-        return (self._base * f)[self._perm]
+            w = 0.5 * (T[:-1] + T[1:])
+            k = np.arange(1, self.c + 1)
+            out[1::2] = ((w / T[:-1])[:, None] ** k).reshape(-1)
+            out[2::2] = ((w / T[1:])[:, None] ** k).reshape(-1)
+        return out
 
-    def _b(self, bc: np.ndarray, vlim: np.ndarray, alim: np.ndarray) -> np.ndarray:
-        S, N, n = self.S, self.N, self.n
+    def _b(self, T: np.ndarray, bc: np.ndarray) -> np.ndarray:
+        """bc (3, 6): per axis [p0, v0, a0, p1, v1, a1]."""
         eq = np.zeros(self.n_eq)
-        eq[:6] = bc
-        hi = np.repeat(self.hi - BOX_EPS, N)
-        lo = np.repeat(self.lo + BOX_EPS, N)
-        vb = np.repeat(vlim * (1 - LIMIT_EPS), n)
-        ab = np.repeat(alim * (1 - LIMIT_EPS), n - 1)
-        return np.concatenate([eq, hi, -lo, vb, vb, ab, ab])
+        per_axis = self.n_eq // 3
+        n = self.n
+        for ax in range(3):
+            o = ax * per_axis
+            for end, Te in ((0, T[0]), (1, T[-1])):
+                for k in range(3):
+                    eq[o + 3 * end + k] = bc[ax, 3 * end + k] * Te ** k / _falling(n, k)
+        return np.concatenate([eq, self._box_b])
 
-    def solve(self, T: np.ndarray, bc: np.ndarray, vlim: np.ndarray, alim: np.ndarray
-              ) -> np.ndarray | None:
-        """Control points (S, n+1) for durations T, boundary values bc = [p0, v0, a0, p1, v1, a1]
-        and per-segment limits, or None when infeasible."""
+    def solve(self, T: np.ndarray, bc: np.ndarray) -> np.ndarray | None:
+        """Control points (S, n+1, 3) for durations T and boundary values bc (3, 6), or None."""
         T = np.asarray(T, dtype=float)
         tm = float(np.mean(T))
-        px = self._p_base * (tm / T[self._p_seg]) ** 5
-        ax = self._a_values(T)
-        b = self._b(np.asarray(bc, float), np.asarray(vlim, float), np.asarray(alim, float))
+        px = self._p_base * (tm / T[self._p_seg]) ** 5 + self._p_diag_track
+        ax = self._base * self._scales(T)[self._scl]
+        b = self._b(T, np.asarray(bc, float))
         self.solves += 1
         if self.solver is None:
             st = clarabel.DefaultSettings()
@@ -216,106 +207,174 @@ class AxisQP:
             p = self._p.copy(); p.data = px
             a = self._a.copy(); a.data = ax
             self.solver = clarabel.DefaultSolver(
-                p, np.zeros(self.nx), a, b,
+                p, self._q, a, b,
                 [clarabel.ZeroConeT(self.n_eq), clarabel.NonnegativeConeT(self.m - self.n_eq)], st)
         else:
             self.solver.update(P=px, A=ax, b=b)
         res = self.solver.solve()
-        status = str(res.status)
-        if "Infeasible" in status or res.x is None or len(res.x) != self.nx:
+        if "Infeasible" in str(res.status) or res.x is None or len(res.x) != self.nx:
             return None
-        # other statuses (e.g. InsufficientProgress) are kept when the point passes the check
-        x = np.asarray(res.x).reshape(self.S, self.N)
+        x = np.asarray(res.x).reshape(3, self.S, self.N).transpose(1, 2, 0)
         if not np.all(np.isfinite(x)):
             return None
-        return x if self.check(x, T, bc, vlim, alim) else None
-
-    def check(self, x: np.ndarray, T: np.ndarray, bc: np.ndarray, vlim: np.ndarray,
-              alim: np.ndarray, tol: float = 1e-7) -> bool:
-        """Box, limits and boundary values hold on the control points (true limits)."""
-        if np.any(x < self.lo[:, None] - tol) or np.any(x > self.hi[:, None] + tol):
-            return False
-        n = self.n
-        v = n * np.diff(x, axis=1) / T[:, None]
-        a = n * (n - 1) * np.diff(x, 2, axis=1) / T[:, None] ** 2
-        if np.any(np.abs(v) > vlim[:, None] + tol) or np.any(np.abs(a) > alim[:, None] + tol):
-            return False
-        ends = np.array([x[0, 0], v[0, 0], a[0, 0], x[-1, -1], v[-1, -1], a[-1, -1]])
-        return bool(np.all(np.abs(ends - bc) <= 1e-6 * np.maximum(1.0, np.abs(bc))))
+        x = np.clip(x, self.lo[:, None, :], self.hi[:, None, :])   # interior-point rounding
+        return x
 
 
-def reference_polyline(route_boxes: np.ndarray, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """[start, w_1, ..., w_{S-1}, goal] with w_i in the overlap of boxes i-1 and i, shortening the
-    polyline by projected Gauss-Seidel on the sum of squared legs."""
+@lru_cache(maxsize=None)
+def _subdivision(m: int, splits: int) -> np.ndarray:
+    """(2^splits (m+1), m+1): control points of the 2^splits equal pieces of a degree-m curve."""
+    left = np.zeros((m + 1, m + 1))
+    right = np.zeros((m + 1, m + 1))
+    for i in range(m + 1):
+        for j in range(i + 1):
+            left[i, j] = comb(i, j) / 2.0 ** i
+        for j in range(i, m + 1):
+            right[i, j] = comb(m - i, j - i) / 2.0 ** (m - i)
+    mats = [np.eye(m + 1)]
+    for _ in range(splits):
+        mats = [x for mm in mats for x in (left @ mm, right @ mm)]
+    out = np.vstack(mats)
+    out.setflags(write=False)
+    return out
+
+
+def peak_bounds(points: np.ndarray, T: np.ndarray, splits: int = HULL_SPLITS
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per segment, upper bounds of max |v| and max |a| (norms): the largest control point of
+    the subdivided derivative curves (convex hull); within ~1% of the true peaks."""
+    n = points.shape[1] - 1
+    T = np.asarray(T, float)[:, None, None]
+    v = n * np.diff(points, axis=1) / T
+    a = n * (n - 1) * np.diff(points, 2, axis=1) / T ** 2
+    vs = np.einsum("ij,sjk->sik", _subdivision(n - 1, splits), v)
+    as_ = np.einsum("ij,sjk->sik", _subdivision(n - 2, splits), a)
+    return np.linalg.norm(vs, axis=2).max(axis=1), np.linalg.norm(as_, axis=2).max(axis=1)
+
+
+def reference_polyline(route_boxes: np.ndarray, start: np.ndarray, goal: np.ndarray,
+                       iterations: int = 60) -> np.ndarray:
+    """[start, w_1, ..., w_{S-1}, goal] with w_i in the overlap of boxes i-1 and i: the shortest
+    such polyline, by projected Gauss-Seidel on reweighted squared legs (weights 1/length)."""
     S = len(route_boxes)
-    ov = [np.concatenate([np.maximum(route_boxes[i, :3], route_boxes[i + 1, :3]),
-                          np.minimum(route_boxes[i, 3:], route_boxes[i + 1, 3:])]) for i in range(S - 1)]
+    ov = np.array([np.concatenate([np.maximum(route_boxes[i, :3], route_boxes[i + 1, :3]),
+                                   np.minimum(route_boxes[i, 3:], route_boxes[i + 1, 3:])])
+                   for i in range(S - 1)]).reshape(-1, 6)
     pts = np.array([start] + [0.5 * (o[:3] + o[3:]) for o in ov] + [goal], dtype=float)
-    for _ in range(80):
+    for it in range(iterations):
+        w = 1.0 / np.maximum(np.linalg.norm(np.diff(pts, axis=0), axis=1), 1e-3) if it >= 10 \
+            else np.ones(S)
         for i in range(1, S):
             o = ov[i - 1]
-            pts[i] = np.clip(0.5 * (pts[i - 1] + pts[i + 1]), o[:3], o[3:])
+            m = (w[i - 1] * pts[i - 1] + w[i] * pts[i + 1]) / (w[i - 1] + w[i])
+            pts[i] = np.clip(m, o[:3], o[3:])
     return pts
 
 
-def split_long_legs(route: list[int], rboxes: np.ndarray, poly: np.ndarray, max_leg: float
-                    ) -> tuple[list[int], np.ndarray, np.ndarray]:
-    """Split polyline legs longer than max_leg into equal segments in the same box: one degree-7
-    segment per long box cannot follow a trapezoidal speed profile inside its convex-hull
-    limits, several can (e.g. 6 m in one box: 72 s as one segment, ~52 s as four)."""
-    if not np.isfinite(max_leg) or max_leg <= 0:
-        return route, rboxes, poly
+def profile_segments(poly: np.ndarray, vertex_speed: np.ndarray, v: float, a: float,
+                     dv: float, max_leg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Break every polyline leg where a trapezoidal speed profile (rest at the ends, at most
+    `vertex_speed` at inner vertices, acceleration a) has changed speed by dv, and cruises at
+    most max_leg: short segments where the speed changes (so piecewise min-jerk curves can
+    follow a flat acceleration), long ones in cruise. Returns (points (S+1, 3), leg index of
+    each segment (S,), durations (S,) of the profile, tracked joints (S+1, 3): the points
+    with NaN where the curve should cut a corner: within the corner arc's reach of a vertex)."""
     legs = np.linalg.norm(np.diff(poly, axis=0), axis=1)
-    k = np.clip(np.ceil(legs / max_leg).astype(int), 1, MAX_SPLIT)
-    while k.sum() > max(MAX_SEGMENTS, len(legs)):     # keep the QP small on long routes
-        max_leg *= 1.25
-        k = np.clip(np.ceil(legs / max_leg).astype(int), 1, MAX_SPLIT)
-    if np.all(k == 1):
-        return route, rboxes, poly
-    new_route, new_boxes, pts = [], [], [poly[0]]
-    for s, ks in enumerate(k):
-        for j in range(1, ks + 1):
-            pts.append(poly[s] + (poly[s + 1] - poly[s]) * j / ks)
-            new_route.append(route[s])
-            new_boxes.append(rboxes[s])
-    return new_route, np.array(new_boxes), np.array(pts)
+    reach = np.zeros(len(poly))
+    if len(legs) > 1:
+        reach[1:-1] = np.where(vertex_speed < v, CORNER_REACH * np.minimum(legs[:-1], legs[1:]), 0.0)
+    S = len(legs)
+    vv = np.full(S + 1, v)
+    vv[0] = vv[-1] = 0.0
+    vv[1:-1] = np.minimum(vv[1:-1], vertex_speed)
+    for i in range(1, S + 1):
+        vv[i] = min(vv[i], np.sqrt(vv[i - 1] ** 2 + 2 * a * legs[i - 1]))
+    for i in range(S - 1, -1, -1):
+        vv[i] = min(vv[i], np.sqrt(vv[i + 1] ** 2 + 2 * a * legs[i]))
+    pts, leg_of, durs, track = [poly[0]], [], [], [poly[0]]
+    for i in range(S):
+        L, va, vb = legs[i], vv[i], vv[i + 1]
+        vp = max(min(v, np.sqrt(max((2 * a * L + va * va + vb * vb) / 2, 0.0))), va, vb, 1e-9)
+        la, ld = (vp * vp - va * va) / (2 * a), (vp * vp - vb * vb) / (2 * a)
+        lc = max(L - la - ld, 0.0)
+        marks = [(0.0, 0.0)]                      # (distance along the leg, time)
+        na = int(np.ceil((vp - va) / dv - 1e-9))
+        for j in range(1, na + 1):
+            vj = va + j * (vp - va) / na
+            marks.append(((vj * vj - va * va) / (2 * a), (vj - va) / a))
+        t_a = (vp - va) / a
+        nc = int(np.ceil(lc / max_leg - 1e-9)) if lc > 1e-3 else 0
+        for j in range(1, nc + 1):
+            marks.append((la + lc * j / nc, t_a + lc * j / nc / vp))
+        t_c = t_a + lc / vp
+        nd = int(np.ceil((vp - vb) / dv - 1e-9))
+        for j in range(1, nd + 1):
+            vj = vp - j * (vp - vb) / nd
+            marks.append((la + lc + (vp * vp - vj * vj) / (2 * a), t_c + (vp - vj) / a))
+        # merge marks closer than 2 cm (the last one is the leg's end)
+        keep = [marks[0]]
+        for m in marks[1:]:
+            if m[0] - keep[-1][0] < 0.02 and len(keep) > 1:
+                keep[-1] = m
+            elif m[0] - keep[-1][0] >= 0.02 or m is marks[-1]:
+                keep.append(m)
+        keep[-1] = (L, keep[-1][1])
+        u = (poly[i + 1] - poly[i]) / max(L, 1e-12)
+        for (d0, t0), (d1, t1) in zip(keep[:-1], keep[1:]):
+            pts.append(poly[i] + u * d1)
+            free = d1 > L - reach[i + 1] - 1e-9 or d1 < reach[i] + 1e-9
+            track.append(np.full(3, np.nan) if free else pts[-1])
+            leg_of.append(i)
+            durs.append(max(t1 - t0, 1e-2))
+    return np.array(pts), np.array(leg_of), np.array(durs), np.array(track)
 
 
-def initial_durations(poly: np.ndarray, v: float, a: float) -> np.ndarray:
-    """Segment durations from a trapezoidal speed profile (v, a) along the polyline."""
+def trapezoid_time(length: float, v: float, a: float) -> float:
+    """Rest-to-rest time over `length` with speed v and acceleration a (the lower bound)."""
+    if length <= 0:
+        return 0.0
+    if length <= v * v / a:
+        return 2.0 * np.sqrt(length / a)
+    return length / v + v / a
+
+
+def _leg_time(L: float, va: float, vb: float, v: float, a: float) -> float:
+    vp = min(v, np.sqrt(max((2 * a * L + va * va + vb * vb) / 2, 0.0)))
+    vp = max(vp, va, vb, 1e-9)
+    d = (2 * vp * vp - va * va - vb * vb) / (2 * a)
+    return (vp - va) / a + (vp - vb) / a + max(L - d, 0.0) / vp
+
+
+def initial_durations(poly: np.ndarray, v: float, a: float, vertex_speed: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """Segment durations from a speed profile along the polyline: rest at the ends, at most
+    `vertex_speed` at the inner vertices (corners), accelerations of a (forward/backward pass)."""
     legs = np.linalg.norm(np.diff(poly, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(legs)])
-    L = s[-1]
-    if L < 1e-9:
-        return np.full(len(legs), 1.0)
-    vp = min(v, np.sqrt(L * a))
-    d_acc = 0.5 * vp * vp / a
-    t_acc = vp / a
-    t_cruise = (L - 2 * d_acc) / vp
-    t = np.where(s < d_acc, np.sqrt(2 * np.maximum(s, 0) / a),
-                 np.where(s <= L - d_acc, t_acc + (s - d_acc) / vp,
-                          2 * t_acc + t_cruise - np.sqrt(2 * np.maximum(L - s, 0) / a)))
-    return np.maximum(np.diff(t), 0.02 * t[-1] / len(legs) + 1e-2)
+    S = len(legs)
+    vv = np.full(S + 1, v)
+    vv[0] = vv[-1] = 0.0
+    if vertex_speed is not None:
+        vv[1:-1] = np.minimum(vv[1:-1], vertex_speed)
+    for i in range(1, S + 1):
+        vv[i] = min(vv[i], np.sqrt(vv[i - 1] ** 2 + 2 * a * legs[i - 1]))
+    for i in range(S - 1, -1, -1):
+        vv[i] = min(vv[i], np.sqrt(vv[i + 1] ** 2 + 2 * a * legs[i]))
+    T = np.array([_leg_time(legs[i], vv[i], vv[i + 1], v, a) for i in range(S)])
+    return np.maximum(T, 0.05 * max(T.sum(), 1.0) / S)
 
 
-def direction_budgets(poly: np.ndarray) -> np.ndarray:
-    """(S, 3) per-axis shares of the squared-norm budget from each leg's direction (rows sum to 1),
-    smoothed with the neighbouring legs so corner segments get both axes."""
+def corner_speeds(poly: np.ndarray, v: float, a: float) -> np.ndarray:
+    """Speed at each inner vertex: an arc tangent to both legs within half of the shorter leg
+    has radius r = d / tan(theta/2); v^2 / r <= a."""
     legs = np.diff(poly, axis=0)
-    d = legs / np.maximum(np.linalg.norm(legs, axis=1, keepdims=True), 1e-9)
-    w = d ** 2
-    if len(w) > 1:
-        ws = w.copy()
-        ws[1:] += 0.5 * w[:-1]
-        ws[:-1] += 0.5 * w[1:]
-        w = ws
-    return _normalise_budget(w)
-
-
-def _normalise_budget(w: np.ndarray) -> np.ndarray:
-    w = w / w.sum(axis=1, keepdims=True)
-    w = (w + BUDGET_FLOOR) / (1.0 + 3 * BUDGET_FLOOR)
-    return w / w.sum(axis=1, keepdims=True)
+    ln = np.linalg.norm(legs, axis=1)
+    u = legs / np.maximum(ln[:, None], 1e-12)
+    cos = np.clip(np.sum(u[:-1] * u[1:], axis=1), -1.0, 1.0)
+    half = 0.5 * np.arccos(cos)
+    d = 0.5 * np.minimum(ln[:-1], ln[1:])
+    with np.errstate(divide="ignore"):
+        r = np.where(half > 1e-6, d / np.tan(half), np.inf)
+    return np.minimum(v, np.sqrt(a * r))
 
 
 @dataclass
@@ -324,83 +383,27 @@ class PositionPlan:
     route: list[int]
     solves: int
     planning_time: float
-
-
-class _Problem:
-    """The three axis QPs of one route with boundary conditions and budgets."""
-
-    def __init__(self, rboxes, start, goal, v0, v1, a0, a1, v_max, a_max, degree):
-        self.qps = [AxisQP(rboxes[:, ax], rboxes[:, ax + 3], degree) for ax in range(3)]
-        self.bc = [np.array([start[ax], v0[ax], a0[ax], goal[ax], v1[ax], a1[ax]]) for ax in range(3)]
-        self.v_max, self.a_max = v_max, a_max
-
-    def solve_axis(self, ax, T, w):
-        return self.qps[ax].solve(T, self.bc[ax], self.v_max * np.sqrt(w[:, ax]),
-                                  self.a_max * np.sqrt(w[:, ax]))
-
-    def bisect(self, T: np.ndarray, w: np.ndarray, rel_tol: float = 0.005
-               ) -> tuple[float, np.ndarray]:
-        """Smallest global scale (to rel_tol) at which all axes are feasible; (alpha, x (S,N,3))."""
-        alphas, xs = [], []
-        for ax in range(3):
-            alphas.append(self._bisect_axis(ax, T, w, rel_tol))
-        alpha = max(a for a, _ in alphas)
-        for _ in range(20):
-            xs = [self.solve_axis(ax, alpha * T, w) if alphas[ax][0] != alpha else alphas[ax][1]
-                  for ax in range(3)]
-            if all(x is not None for x in xs):
-                return alpha, np.stack(xs, axis=-1)
-            alpha *= 1.0 + rel_tol
-        raise PlanningError("no feasible timing found for the box route")
-
-    def _bisect_axis(self, ax, T, w, rel_tol):
-        x = self.solve_axis(ax, T, w)
-        if x is None:
-            lo, hi = 1.0, 2.0
-            for _ in range(25):
-                x = self.solve_axis(ax, hi * T, w)
-                if x is not None:
-                    break
-                lo, hi = hi, hi * 2.0
-            else:
-                raise PlanningError("no feasible timing found for the box route")
-        else:
-            lo, hi = 0.5, 1.0
-            for _ in range(25):
-                x2 = self.solve_axis(ax, lo * T, w)
-                if x2 is None:
-                    break
-                hi, x = lo, x2
-                lo *= 0.5
-        best = x
-        while hi - lo > rel_tol * hi:
-            mid = 0.5 * (lo + hi)
-            x2 = self.solve_axis(ax, mid * T, w)
-            if x2 is None:
-                lo = mid
-            else:
-                hi, best = mid, x2
-        return hi, best
-
-    def usage(self, x: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per segment and axis: peak |v|/v_max and peak |a|/a_max on the control points."""
-        n = x.shape[1] - 1
-        v = np.abs(n * np.diff(x, axis=1) / T[:, None, None]).max(axis=1) / self.v_max
-        a = np.abs(n * (n - 1) * np.diff(x, 2, axis=1) / T[:, None, None] ** 2).max(axis=1) / self.a_max
-        return v, a
+    lower_bound: float = 0.0            # s: trapezoid on the shortest polyline of the route
 
     @property
-    def solves(self) -> int:
-        return sum(q.solves for q in self.qps)
+    def gap(self) -> float:
+        """Relative time-optimality gap against the trapezoidal lower bound."""
+        return self.spline.duration / self.lower_bound - 1.0 if self.lower_bound > 0 else 0.0
+
+
+def _usage(x: np.ndarray, T: np.ndarray, v_max: float, a_max: float) -> np.ndarray:
+    vb, ab = peak_bounds(x, T)
+    return np.maximum(vb / v_max, np.sqrt(ab / a_max))
 
 
 def plan_position(start: np.ndarray, goal: np.ndarray, v_max: float, a_max: float,
                   safe: SafeSet | None = None, v0: np.ndarray | None = None,
                   v1: np.ndarray | None = None, a0: np.ndarray | None = None,
-                  a1: np.ndarray | None = None, refine_rounds: int = 4,
+                  a1: np.ndarray | None = None, refine_rounds: int = RETIME_STEPS,
                   degree: int = DEGREE, max_leg: float = MAX_LEG) -> PositionPlan:
-    """Time-optimal (for the limits) minimum-jerk spline from start to goal inside `safe`.
-    Boundary velocity/acceleration default to rest. Raises OutsideSafeSet, NoRoute, PlanningError."""
+    """Near time-optimal (for the norm limits) minimum-jerk spline from start to goal inside
+    `safe`. Boundary velocity/acceleration default to rest. Raises OutsideSafeSet, NoRoute,
+    PlanningError."""
     t_start = time.perf_counter()
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     z = np.zeros(3)
@@ -410,35 +413,67 @@ def plan_position(start: np.ndarray, goal: np.ndarray, v_max: float, a_max: floa
             raise ValueError(f"{name} must be a finite 3-vector")
     if not (v_max > 0 and a_max > 0):
         raise PlanningError("the flight mode's velocity/acceleration limits are zero")
+    if max(np.linalg.norm(v0), np.linalg.norm(v1)) > v_max or max(np.linalg.norm(a0), np.linalg.norm(a1)) > a_max:
+        raise PlanningError("boundary velocity or acceleration beyond the limits")
     safe = safe_set() if safe is None else safe
     route = safe.route(start, goal)
     rboxes = safe.boxes[route]
     poly = reference_polyline(rboxes, start, goal)
-    route, rboxes, poly = split_long_legs(route, rboxes, poly, max_leg)
-    T = initial_durations(poly, v_max, a_max)
-    w = direction_budgets(poly)
-    prob = _Problem(rboxes, start, goal, v0, v1, a0, a1, v_max, a_max, degree)
-    alpha, x = prob.bisect(T, w)
-    T = alpha * T
-    for _ in range(refine_rounds):
-        uv, ua = prob.usage(x, T)
-        # per-axis budget from what the solution needs (squared shares), blended with the old
-        need = np.maximum(uv, np.sqrt(ua)) ** 2
-        w_new = _normalise_budget(0.5 * w + 0.5 * need / np.maximum(need.sum(1, keepdims=True), 1e-12))
-        seg_u = np.max(np.maximum(uv / np.sqrt(w), np.sqrt(ua / w)), axis=1)
-        Tn = T * np.clip(seg_u + 0.02, 0.5, 1.0)
-        try:
-            a2, x2 = prob.bisect(Tn, w_new)
-        except PlanningError:
+    length = float(np.linalg.norm(np.diff(poly, axis=0), axis=1).sum())
+    lower = trapezoid_time(length, v_max, a_max)
+    corners = corner_speeds(poly, v_max, a_max)
+    dv = v_max * DV_FRACTION
+    while True:
+        _, leg_of, T, track = profile_segments(poly, corners, v_max, a_max, dv, max_leg)
+        if len(T) <= MAX_SEGMENTS or dv >= v_max:
             break
-        if a2 * Tn.sum() < T.sum() * 0.995:
-            T, x, w = a2 * Tn, x2, w_new
+        dv *= 1.3
+        max_leg *= 1.3
+    route = [route[i] for i in leg_of]
+    rboxes = rboxes[leg_of]
+    bc = np.stack([start, v0, a0, goal, v1, a1], axis=1)       # (3, 6)
+    qp = SplineQP(rboxes[:, :3], rboxes[:, 3:], degree, CONTINUITY, track, TRACK_WEIGHT)
+    best = None
+    stale = 0
+    for step in range(refine_rounds + 1):
+        x = qp.solve(T, bc)
+        if x is None:
+            if best is not None:
+                break
+            T = T * 1.5
+            continue
+        u = _usage(x, T, v_max, a_max)
+        total = float(u.max()) * T.sum()
+        if best is None or total < best[2] * 0.998:
+            stale = 0
         else:
+            stale += 1
+        if best is None or total < best[2]:
+            best = (x, T.copy(), total, float(u.max()))
+        if stale >= 2:
             break
+        T = T * np.clip(u, 0.5, 2.0)
+    if best is None:
+        raise PlanningError("no feasible spline found for the box route")
+    x, T, _, k = best
+    T = T * max(k, 1e-9)
+    if any(np.any(v) for v in (v0, v1, a0, a1)):
+        # scaling time changes non-zero boundary rates: re-solve until within the limits
+        for _ in range(8):
+            x = qp.solve(T, bc)
+            if x is None:
+                raise PlanningError("no feasible spline found for the boundary states")
+            k = float(_usage(x, T, v_max, a_max).max())
+            if k <= 1.0:
+                break
+            T = T * (k * 1.001)
+        else:
+            raise PlanningError("could not meet the limits with the given boundary states")
     spline = Spline(points=x, durations=T, boxes=rboxes)
-    return PositionPlan(spline=spline, route=route, solves=prob.solves,
-                        planning_time=time.perf_counter() - t_start)
+    return PositionPlan(spline=spline, route=route, solves=qp.solves,
+                        planning_time=time.perf_counter() - t_start, lower_bound=lower)
 
 
-__all__ = ["PlanningError", "Spline", "AxisQP", "PositionPlan", "plan_position", "NoRoute",
-           "OutsideSafeSet", "reference_polyline", "initial_durations", "direction_budgets"]
+__all__ = ["PlanningError", "Spline", "SplineQP", "PositionPlan", "plan_position", "NoRoute",
+           "OutsideSafeSet", "reference_polyline", "initial_durations", "peak_bounds",
+           "trapezoid_time"]
