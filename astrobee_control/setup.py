@@ -23,7 +23,6 @@ setup(
     entry_points={
         "console_scripts": [
             'pd_controller_node = astrobee_control.pd_controller_node:main',
-            'mpc_controller_node = astrobee_control.mpc_controller_node:main',
         ],
     },
 )

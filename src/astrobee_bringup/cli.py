@@ -11,14 +11,6 @@ import sys
 from roszen.cli import main as roszen_main
 from roszen.cli.common import CliError, line_buffered
 
-# The project's node executables, found by `astrobee run` when no colcon install has them.
-NODES: dict[tuple[str, str], str] = {
-    ("astrobee_sim", "sim_node"): "astrobee_sim.sim_node:main",
-    ("astrobee_planning", "planner_node"): "astrobee_planning.planner_node:main",
-    ("astrobee_control", "pd_controller_node"): "astrobee_control.pd_controller_node:main",
-    ("astrobee_control", "mpc_controller_node"): "astrobee_control.mpc_controller_node:main",
-    ("astrobee", "mission"): "astrobee_bringup.mission:main",   # the mission client of a launch
-}
 
 USAGE = """usage: astrobee <command> [args]
 
@@ -27,6 +19,7 @@ commands:
   launch NAME [arg:=value ...]   start a launch description (astrobee_bringup/launch/NAME.py)
   router [--port P]              run the Zenoh router (rmw_zenohd equivalent)
   topic | service | node | param | interface | bag   ros2-style verbs (`astrobee topic -h`)
+  bag render BAG -o flight.mp4   render a recorded run to MP4/GIF, headless
 """
 
 
@@ -76,7 +69,7 @@ def _launch(argv: list[str]) -> int:
     from pathlib import Path
     try:
         return launcher.launch(a.name, arguments, port=a.port, use_ros2=a.ros2,
-                               run_dir=Path(a.run_dir) if a.run_dir else None, registry=NODES,
+                               run_dir=Path(a.run_dir) if a.run_dir else None, 
                                sigint_timeout=a.sigint_timeout,
                                sigterm_timeout=a.sigterm_timeout, stop_grace=a.stop_grace)
     except launcher.LaunchError as exc:
@@ -96,7 +89,10 @@ def main(argv: list[str] | None = None) -> int:
         except CliError as exc:
             print(f"astrobee launch: {exc}", file=sys.stderr)
             return 1
-    return roszen_main(argv, prog="astrobee", registry=NODES)
+    if argv[:2] == ["bag", "render"]:
+        from astrobee_bringup import render_bag
+        return render_bag.main(argv[2:])
+    return roszen_main(argv, prog="astrobee")
 
 
 if __name__ == "__main__":

@@ -23,12 +23,14 @@ from typing import Any
 import numpy as np
 
 from astrobee import config, flight_modes
+from astrobee import msgconv as mc
 from astrobee import rotations as rot
+from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup import summary as sm
 
-# MotionState values (astrobee_msgs/MotionState)
-IDLE, STOPPED, STOPPING, CONTROLLING = 1, 2, 4, 9
-NAMES = {0: "INITIALIZING", 1: "IDLE", 2: "STOPPED", 3: "IDLING", 4: "STOPPING", 9: "CONTROLLING"}
+IDLE, STOPPED, STOPPING, CONTROLLING = (mc.MotionState.IDLE, mc.MotionState.STOPPED,
+                                        mc.MotionState.STOPPING, mc.MotionState.CONTROLLING)
+NAMES = mc.MotionState.NAMES
 
 
 # After a fault (the sim's propulsion watchdog: the controller is gone) the leg ends once the
@@ -51,6 +53,7 @@ class LegResult:
     reason: str = ""
     flight_mode: str = ""
     carrying_bag: bool = False
+    carry_extent: float = 0.0                # m of planning margin for the bag
     start: list[float] = field(default_factory=list)
     goal: list[float] = field(default_factory=list)
     planning_time: float | None = None
@@ -142,6 +145,9 @@ class MissionClient:
         self.mob_changes: list[tuple[float, int, str]] = []
         self.faults: list[str] = []
         self.bag_attached = False
+        self.scenario_info: Any = None      # the sim's latched /sim/scenario (ScenarioInfo)
+        node.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO,
+                                 self._on_scenario, latched)
         node.create_subscription("geometry_msgs/msg/PoseStamped", pre + sm.POSE, self._on_pose, 10)
         node.create_subscription("astrobee_msgs/msg/FamCommand", pre + sm.COMMAND,
                                  lambda m: self.series.add_command(m), 10)
@@ -164,6 +170,9 @@ class MissionClient:
         self.pose = (_vec(msg.pose.position), _quat(msg.pose.orientation))
         self.sim_time = sm._t(msg.header.stamp)
         self.series.add_pose(msg)
+
+    def _on_scenario(self, msg: Any) -> None:
+        self.scenario_info = msg
 
     def _on_bag(self, msg: Any) -> None:
         self.bag_attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
@@ -224,23 +233,17 @@ class MissionClient:
 
     def _fly(self, name: str, reset: bool, progress: Progress, res: LegResult,
              wall_timeout: float, ready_timeout: float) -> None:
-        scen = config.scenario(name)
-        fm = flight_modes.get(scen.get("flight_mode") or None)
-        res.flight_mode = fm.name
-        res.tolerance_position, res.tolerance_attitude = fm.tolerance_pos, fm.tolerance_att
-        res.carrying_bag = bool(scen.get("bag"))
-        goal_p = np.asarray(scen["goal"]["position"], float)
-        goal_q = rot.normalize(np.asarray(scen["goal"].get("orientation", [0, 0, 0, 1]), float))
-        res.goal = [*goal_p.tolist(), *goal_q.tolist()]
-        robot = scen["robots"][0]
-        start_p = np.asarray(robot["position"], float)
-
+        if not reset and (self.scenario_info is None or self.scenario_info.name != name):
+            self.spin_until(lambda: self.scenario_info is not None, ready_timeout,
+                            "the simulator's scenario (/sim/scenario)")
+            if self.scenario_info.name != name:
+                reset = True      # the sim runs another scenario: bring it to this one
         if reset:
             # pause first so that no command of the previous leg (stamped with its late sim
             # times) is still in flight when the clock restarts, then reset and resume
             ctl = self.roszen.request_class("astrobee_msgs/srv/SimControl")
             pause, resume = ctl(), ctl()
-            pause.command, resume.command = 0, 1
+            pause.command, resume.command = mc.SimControl.PAUSE, mc.SimControl.RESUME
             self.call(self.control_cli, pause, ready_timeout, "/sim/control (pause)")
             end = time.monotonic() + 0.3
             self.spin_until(lambda: time.monotonic() > end, 5.0, "in-flight commands")
@@ -256,6 +259,23 @@ class MissionClient:
             self.spin_until(lambda: len(self.mob_changes) > n_changes
                             or len(self.series.pose_t) > n_poses + 60, ready_timeout,
                             "the controller to take the reset")
+        # the scenario as the simulator built it (launch overrides included)
+        self.spin_until(lambda: self.scenario_info is not None and self.scenario_info.name == name,
+                        ready_timeout, f"the simulator's description of {name} (/sim/scenario)")
+        info = self.scenario_info
+        fm = flight_modes.get(info.flight_mode or None)
+        res.flight_mode = fm.name
+        res.tolerance_position, res.tolerance_attitude = fm.tolerance_pos, fm.tolerance_att
+        res.carrying_bag = bool(info.carrying_bag)
+        if not info.has_goal:
+            raise MissionError(f"scenario {name} has no goal")
+        goal_p, goal_q = mc.pose(info.goal)
+        goal_q = rot.normalize(goal_q)
+        res.goal = [*goal_p.tolist(), *goal_q.tolist()]
+        if self.ns not in list(info.robots):
+            raise MissionError(f"scenario {name} has no robot {self.ns or '(default)'!r}: "
+                               f"robots {list(info.robots)}")
+        start_p, _ = mc.pose(info.starts[list(info.robots).index(self.ns)])
         progress.update(f"[mission] {name}: waiting for the robot's state and the controller")
         self.spin_until(lambda: self.pose is not None
                         and float(np.linalg.norm(self.pose[0] - start_p)) < 0.5
@@ -268,10 +288,10 @@ class MissionClient:
         _set_pose(req.start, pos, q)
         _set_pose(req.goal, goal_p, goal_q)
         req.flight_mode = fm.name
-        req.face_forward = bool(scen.get("face_forward", False))
-        bag = scen.get("bag") or {}
-        # the bag trails along the path: extra margin only where a scenario asks for it
-        req.carry_extent = float(scen.get("carry_extent", 0.0)) if bag else 0.0
+        req.face_forward = bool(info.face_forward)
+        # the bag trails along the path: the scenario's margin (bags.yaml's carry_extent default)
+        req.carry_extent = float(info.carry_extent) if info.carrying_bag else 0.0
+        res.carry_extent = req.carry_extent
         progress.update(f"[mission] {name}: planning")
         plan = self.call(self.planner, req, 120.0, "/mob/planner/global")
         res.planning_time = float(plan.planning_time)
@@ -427,7 +447,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
             except ValueError:  # not the main thread
                 pass
     for name in scenarios:
-        config.scenario(name)  # fail early on an unknown scenario
+        Scenario.load(name)  # fail early on an unknown or invalid scenario
     args = list(argv or ["mission"])
     if "--ros-args" not in args:
         args += ["--ros-args"]
@@ -492,8 +512,8 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(own)
     try:
         for name in a.scenario:
-            config.scenario(name)
-    except config.ConfigError as exc:
+            Scenario.load(name)
+    except (ScenarioError, config.ConfigError) as exc:
         print(f"astrobee mission: {exc}", file=sys.stderr)
         return 2
     run_dir = Path(a.run_dir) if a.run_dir else Path("runs") / time.strftime("%Y%m%d-%H%M%S")

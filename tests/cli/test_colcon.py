@@ -13,11 +13,18 @@ import pytest
 
 from conftest import ROOT
 
-EXECUTABLES = {
-    "astrobee_sim": ["sim_node"],
-    "astrobee_planning": ["planner_node"],
-    "astrobee_control": ["pd_controller_node", "mpc_controller_node"],
-}
+def _registry() -> dict[str, list[str]]:
+    """The node executables of the ament packages, from the one registry (entry points)."""
+    from importlib.metadata import entry_points
+    out: dict[str, list[str]] = {}
+    for ep in entry_points(group="roszen.nodes"):
+        pkg, _, exe = ep.name.partition("/")
+        if (ROOT / pkg / "setup.py").is_file():
+            out.setdefault(pkg, []).append(exe)
+    return out
+
+
+EXECUTABLES = _registry()
 COLCON = Path(sys.executable).parent / "colcon"
 
 
@@ -54,6 +61,18 @@ def test_colcon_build_installs_where_ros2_run_looks(tmp_path):
             del os.environ["AMENT_PREFIX_PATH"]
         else:
             os.environ["AMENT_PREFIX_PATH"] = old
+
+
+def test_ament_packages_list_the_registry_executables():
+    """Each package's setup.py console_scripts are exactly its entries in the registry."""
+    import re
+    from importlib.metadata import entry_points
+    reg = {ep.name: ep.value for ep in entry_points(group="roszen.nodes")}
+    assert {"astrobee_sim", "astrobee_planning", "astrobee_control"} <= set(EXECUTABLES)
+    for pkg in EXECUTABLES:
+        text = (ROOT / pkg / "setup.py").read_text()
+        scripts = dict(re.findall(r"'(\w+) = ([\w.]+:\w+)'", text))
+        assert scripts == {exe: reg[f"{pkg}/{exe}"] for exe in EXECUTABLES[pkg]}, pkg
 
 
 def test_package_xml_is_ament_python_format_3():

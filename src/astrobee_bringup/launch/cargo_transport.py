@@ -5,7 +5,9 @@ node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <r
 clock (realtime | fast | lockstep; default lockstep headless: the sim waits for each
 command, as fast as the graph answers; realtime with gui), lockstep_timeout (wall s the sim
 waits for a tick's command before stepping on; the sim's default when unset), gui (true |
-false), bag_model / bag_variant / bag_resolution (override the scenario's bag on sim_node),
+false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / flight_mode /
+robots (override the scenario: validated here with the scenario before any process starts,
+then built by sim_node, which publishes the result on /sim/scenario for the others),
 mission (true | false: run the mission client, default true), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
@@ -16,47 +18,68 @@ exits, so the bag holds the fault and the coasting robot. Without it, the contro
 from __future__ import annotations
 
 from astrobee.config import load_yaml
+from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
+
+
+CONTROLLERS = ("pd",)
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_bag")
+
+
+def _number(ctx: LaunchContext, key: str, kind: type, what: str):
+    try:
+        return kind(ctx.arg(key))
+    except ValueError:
+        raise LaunchError(f"{key} must be {what}, got '{ctx.arg(key)}'") from None
+
+
+def scenario_overrides(ctx: LaunchContext) -> dict:
+    """Launch arguments that change the scenario (validated by Scenario.override)."""
+    out: dict = {}
+    for key in ("bag_model", "bag_variant", "fem_solver", "flight_mode"):
+        if ctx.arg(key):
+            out[key] = ctx.arg(key)
+    if ctx.arg("bag_resolution"):
+        out["bag_resolution"] = _number(ctx, "bag_resolution", int, "a node count")
+    if ctx.arg("bag_mass"):
+        out["bag_mass"] = _number(ctx, "bag_mass", float, "a mass in kg")
+    if ctx.arg("robots"):
+        out["robots"] = [r.strip() for r in ctx.arg("robots").split(",")]
+    return out
 
 
 def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     scenario = ctx.arg("scenario", "node2_to_jem")
-    if not (ctx.config_dir / "scenarios" / f"{scenario}.yaml").is_file():
-        raise LaunchError(f"unknown scenario '{scenario}' (no config/scenarios/{scenario}.yaml)")
     controller = ctx.arg("controller", "pd")
-    if controller not in ("pd", "mpc"):
-        raise LaunchError(f"controller must be pd or mpc, got '{controller}'")
+    if controller not in CONTROLLERS:
+        raise LaunchError(f"controller must be {' or '.join(CONTROLLERS)}, got '{controller}'")
     ctl_cfg = load_yaml(ctx.config_dir / "controllers.yaml").get(controller, {})
     ctl_name = f"{controller}_controller_node"
-    ctl_params = write_params_file(ctx.run_dir / "params" / f"{ctl_name}.yaml", ctl_name,
-                                   {**flatten_params(ctl_cfg), "scenario": scenario})
     demo = ctx.flag("demo")
-    legs = ["node2_to_jem", "node2_to_jem_bag"] if demo else [scenario]
+    legs = list(DEMO_LEGS) if demo else [scenario]
     if demo:
         scenario = legs[0]
     gui = ctx.flag("gui")
     clock = ctx.arg("clock", "realtime" if gui else "lockstep")
     if clock not in ("realtime", "fast", "lockstep"):
         raise LaunchError(f"clock must be realtime, fast or lockstep, got '{clock}'")
+    overrides = scenario_overrides(ctx)
+    # every leg is built here once, with the overrides, before any process starts
+    for leg in legs:
+        try:
+            Scenario.load(leg, **overrides)
+        except ScenarioError as exc:
+            raise LaunchError(f"scenario {leg}: {exc}") from None
+    ctl_params = write_params_file(ctx.run_dir / "params" / f"{ctl_name}.yaml", ctl_name,
+                                   flatten_params(ctl_cfg))
     common = {"scenario": scenario, "use_sim_time": True}
     sim_params = {**common, "clock_mode": clock, "gui": gui}
     if ctx.arg("lockstep_timeout"):
-        try:
-            sim_params["lockstep_timeout"] = float(ctx.arg("lockstep_timeout"))
-        except ValueError:
-            raise LaunchError(f"lockstep_timeout must be a number of seconds, "
-                              f"got '{ctx.arg('lockstep_timeout')}'") from None
+        sim_params["lockstep_timeout"] = _number(ctx, "lockstep_timeout", float, "a number of seconds")
         if not sim_params["lockstep_timeout"] > 0:
             raise LaunchError("lockstep_timeout must be > 0")
-    for key in ("bag_model", "bag_variant"):       # override the scenario's bag
-        if ctx.arg(key):
-            sim_params[key] = ctx.arg(key)
-    if ctx.arg("bag_resolution"):
-        try:
-            sim_params["bag_resolution"] = int(ctx.arg("bag_resolution"))
-        except ValueError:
-            raise LaunchError(f"bag_resolution must be a node count, "
-                              f"got '{ctx.arg('bag_resolution')}'") from None
+    for key, value in overrides.items():     # the sim builds the scenario with the overrides
+        sim_params[key] = ",".join(value) if isinstance(value, list) else value
     mission = ctx.flag("mission", True)
     port = ctx.port
     nodes = [
@@ -77,8 +100,8 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     if mission:
         import sys
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
-        nodes.append(NodeSpec("mission", "astrobee", "mission", kind="client",
-                              command=["run", "astrobee", "mission", *args],
+        nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
+                              command=["run", "astrobee_bringup", "mission", *args],
                               ros2_command=[sys.executable, "-m", "astrobee_bringup.mission", *args]))
     return nodes
 
