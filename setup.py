@@ -1,4 +1,4 @@
-"""Maps the project's package roots (DESIGN.md layout) onto one distribution.
+"""Maps the project's package roots (docs/design.md layout) onto one distribution.
 
 pyproject.toml holds the metadata; this file only computes the package list, because the
 packages live in several top-level folders (src/, and the ament_python package folders).
