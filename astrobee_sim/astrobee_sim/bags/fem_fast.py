@@ -1,0 +1,222 @@
+"""The FEM bag integrated by our own solver (mass_spring) beside the pybullet robots and walls.
+
+Same tet mesh, mass and spring material as the Bullet soft body (fem.py), with no pybullet body
+for the bag: after each pybullet step the bag takes one semi-implicit step with its grasped
+nodes tied to the gripper's new pose by stiff implicit springs, then collides its nodes with the
+station's wall slabs and the robots' body boxes. Forces go both ways: the anchor springs' pull on
+the gripper and the robots' contact reactions are applied to the robots in pybullet before the
+next step (`before_step`). The whole bag state is a few numpy arrays, so snapshot/restore is
+exact (positions and velocities), unlike pybullet's soft bodies.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from astrobee import config
+from astrobee import rotations as rot
+
+from .base import Bag, BagState, kabsch
+from .mass_spring import Anchors, MassSpring
+from .mesh import bag_mesh
+from .node_contacts import collide_moving_boxes, collide_static_boxes
+
+
+def quat_matrices(q: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) rotation matrices of quaternions (K, 4) [x,y,z,w]."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def robot_box_half() -> np.ndarray:
+    """Half extents of the robot's collision box (body + propulsion modules), body frame."""
+    cfg = config.astrobee()
+    bs, ps, py = cfg["body_size"], cfg["propulsion_module_size"], cfg["propulsion_module_y"]
+    return 0.5 * np.array([max(bs[0], ps[0]), 2 * py + ps[1], max(bs[2], ps[2])])
+
+
+class FastFemBag(Bag):
+    """fem bag, solver "fast": see the module docstring."""
+    model = "fem"
+    solver_name = "fast"
+
+    def __init__(self, client: int, variant: str = "front", size=None, mass=None,
+                 resolution: int | None = None, walls: np.ndarray | None = None, **params):
+        super().__init__(client, variant, size, mass, **params)
+        res = int(resolution or self.params.get("resolution", 400))
+        self.mesh = bag_mesh(self.size, self.handles, res, self.handle_length, self.handle_height)
+        self.num_nodes = len(self.mesh.nodes)
+        self.springs = MassSpring(self.mesh.nodes, self.mesh.tets, self.mass,
+                                  float(self.params.get("elastic_stiffness", 50.0)),
+                                  float(self.params.get("damping", 0.1)))
+        if walls is None:
+            from ..simulation import sim_defaults, station
+            walls = station(float(sim_defaults().get("wall_thickness", 0.25))).walls
+        self.walls = np.asarray(walls, dtype=float)
+        self.friction = float(self.params.get("friction", 0.5))
+        self.margin = float(self.params.get("collision_margin", 0.006))
+        # total anchor stiffness/damping per handle (N/m, N s/m), spread over its nodes
+        self.anchor_k = float(self.params.get("anchor_stiffness", 5000.0))
+        self.anchor_c = float(self.params.get("anchor_damping", 20.0))
+        self.half = robot_box_half()
+        self.id = -1                                  # no pybullet body
+        self.x = np.ascontiguousarray(self.mesh.nodes[:, None, :].copy())
+        self.v = np.zeros_like(self.x)
+        self._t = 0.0
+        self._grasps: list[dict] = []                 # robot, nodes, offsets (gripper frame)
+        self._anchors: Anchors | None = None
+        self._target = self._target_vel = None
+        self._pending: list = []                      # per robot: (id, link, F, at, tau, Fc, com, tauc)
+        self._state: BagState | None = None
+        self.last_penetration = 0.0
+
+    @property
+    def body_ids(self) -> list[int]:
+        return []
+
+    # ---- geometry and grasp ----------------------------------------------------------------
+    def nodes(self) -> np.ndarray:
+        return self.x[:, 0, :].copy()
+
+    def points(self) -> np.ndarray:
+        return self.x[:, 0, :]
+
+    def set_pose(self, position, orientation) -> None:
+        self.x[:, 0, :] = np.asarray(position) + rot.rotate(np.asarray(orientation), self.mesh.nodes)
+        self.v[...] = 0.0
+        self._state = None
+
+    def _gripper(self, robot) -> tuple:
+        """Gripper link: frame position, frame rotation matrix, COM position, COM velocity, omega."""
+        p = self.p
+        ls = p.getLinkState(robot.id, robot.links["gripper"], computeLinkVelocity=1,
+                            computeForwardKinematics=1, physicsClientId=self.client)
+        R = np.array(p.getMatrixFromQuaternion(ls[5])).reshape(3, 3)
+        return np.array(ls[4]), R, np.array(ls[0]), np.array(ls[6]), np.array(ls[7])
+
+    def grasp(self, k: int, robot) -> None:
+        nodes = np.asarray(self.mesh.handle_nodes[k], dtype=int)
+        pos, R, _, _, _ = self._gripper(robot)
+        offsets = (self.x[nodes, 0, :] - pos) @ R            # gripper frame
+        self._grasps.append({"robot": robot, "nodes": nodes, "offsets": offsets})
+        self._rebuild_anchors()
+        self._targets()
+
+    def attach(self, robots: list) -> None:
+        self._contact_robots = list(robots)          # every robot's body collides with the bag
+        super().attach(robots)
+
+    def release(self) -> None:
+        self._grasps = []
+        self._anchors = None
+        self._pending = []
+        self.attached = [False] * len(self.handles)
+
+    def _rebuild_anchors(self) -> None:
+        nodes = np.concatenate([g["nodes"] for g in self._grasps])
+        ka = np.concatenate([np.full(len(g["nodes"]), self.anchor_k / len(g["nodes"]))
+                             for g in self._grasps])
+        ca = np.concatenate([np.full(len(g["nodes"]), self.anchor_c / len(g["nodes"]))
+                             for g in self._grasps])
+        self._anchors = Anchors(nodes, ka, ca)
+
+    def _targets(self) -> list:
+        """Anchor targets and their velocities from the grippers' current state."""
+        tgt, vel, grip = [], [], []
+        for g in self._grasps:
+            pos, R, com, vcom, w = self._gripper(g["robot"])
+            t = pos + g["offsets"] @ R.T
+            tgt.append(t)
+            vel.append(vcom + np.cross(w, t - com))
+            grip.append(com)
+        self._target = np.concatenate(tgt)[:, None, :]
+        self._target_vel = np.concatenate(vel)[:, None, :]
+        return grip
+
+    # ---- stepping --------------------------------------------------------------------------
+    def before_step(self, dt: float) -> None:
+        """Apply the bag's pull on each gripper and its contact push on each robot body."""
+        p, c = self.p, self.client
+        for rid, link, f, at, tau, fc, com, tc in self._pending:
+            if f is not None:
+                p.applyExternalForce(rid, link, f, at, p.WORLD_FRAME, physicsClientId=c)
+                p.applyExternalTorque(rid, link, tau, p.WORLD_FRAME, physicsClientId=c)
+            if fc is not None:
+                p.applyExternalForce(rid, -1, fc, com, p.WORLD_FRAME, physicsClientId=c)
+                p.applyExternalTorque(rid, -1, tc, p.WORLD_FRAME, physicsClientId=c)
+
+    def after_step(self, dt: float, sample: bool = True) -> None:
+        """One bag step after the robots' pybullet step, then the forces for the next one."""
+        self._t += dt
+        x, v = self.x, self.v
+        grip = self._targets() if self._grasps else []
+        x_prev = x.copy()
+        self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel)
+        flat_x, flat_v = x.reshape(-1, 3), v.reshape(-1, 3)
+        self.last_penetration = collide_static_boxes(flat_x, flat_v, x_prev.reshape(-1, 3),
+                                                     self.walls, self.margin, self.friction)
+        robots = getattr(self, "_contact_robots", None) or self.robots or []
+        pending = []
+        skip = self._anchors.nodes if self._anchors is not None else None
+        for r in robots:
+            pos, q, vel, w = r.state()
+            fc, tc = collide_moving_boxes(
+                x, v, x_prev, pos[None], quat_matrices(q[None]), vel[None], w[None], self.half,
+                self.margin, self.friction, self.springs.node_mass, dt, skip)
+            pending.append([r.id, None, None, None, None,
+                            fc[0].tolist() if fc.any() else None, pos.tolist(), tc[0].tolist()])
+        if self._grasps:
+            fa = self.springs.anchor_forces(x, v, self._anchors, self._target, self._target_vel)[:, 0]
+            start = 0
+            for g, com in zip(self._grasps, grip):
+                n = len(g["nodes"])
+                fi, ti = fa[start:start + n], self._target[start:start + n, 0]
+                start += n
+                k = robots.index(g["robot"]) if g["robot"] in robots else None
+                entry = pending[k] if k is not None else [g["robot"].id, None, None, None, None,
+                                                          None, None, None]
+                entry[1] = g["robot"].links["gripper"]
+                entry[2] = fi.sum(axis=0).tolist()
+                entry[3] = com.tolist()
+                entry[4] = np.cross(ti - com, fi).sum(axis=0).tolist()
+                if k is None:
+                    pending.append(entry)
+        self._pending = pending
+        self._state = None
+
+    # ---- state -----------------------------------------------------------------------------
+    def state(self) -> BagState:
+        if self._state is not None:
+            return self._state
+        x, v = self.x[:, 0, :], self.v[:, 0, :]
+        q, c = kabsch(self.mesh.nodes, x)
+        vel = v.mean(axis=0)
+        r = x - c
+        L = np.cross(r, v - vel).sum(axis=0)
+        inertia = np.eye(3) * np.einsum("ij,ij->", r, r) - r.T @ r
+        w = np.linalg.solve(inertia, L)
+        rest = c + rot.rotate(q, self.mesh.nodes - self.mesh.nodes.mean(axis=0))
+        deform = float(np.sqrt(np.mean(np.sum((x - rest) ** 2, axis=1))))
+        pos = c - rot.rotate(q, self.mesh.nodes.mean(axis=0))
+        self._state = BagState(pos, q, vel, w, deform, list(self.attached))
+        return self._state
+
+    def snapshot(self):
+        return {"x": self.x.copy(), "v": self.v.copy(), "t": self._t,
+                "pending": [[list(e) if isinstance(e, list) else e for e in row]
+                            for row in self._pending],
+                "target": None if self._target is None else self._target.copy(),
+                "target_vel": None if self._target_vel is None else self._target_vel.copy()}
+
+    def restore(self, snap) -> None:
+        """Exact: node positions, velocities and the forces pending for the robots."""
+        self.x[...] = snap["x"]
+        self.v[...] = snap["v"]
+        self._t = snap["t"]
+        self._pending = [[list(e) if isinstance(e, list) else e for e in row]
+                         for row in snap["pending"]]
+        self._target = None if snap["target"] is None else snap["target"].copy()
+        self._target_vel = None if snap["target_vel"] is None else snap["target_vel"].copy()
+        self._state = None
