@@ -121,7 +121,7 @@ class SimNode:
         self.publish_modes()
         self.publish_state()
         self.log.info(f"sim up: scenario {self.sim.scenario_name}, robots {list(self.sim.robots)}, "
-                      f"bag {self.sim.bag_cfg.get('model', 'none') if self.sim.bag_cfg else 'none'}, "
+                      f"bag {self.sim.scenario.bag.model if self.sim.scenario.bag else 'none'}, "
                       f"clock {self.clock_mode}, physics {physics_rate:g} Hz")
 
     # ---- wiring per robot --------------------------------------------------------------

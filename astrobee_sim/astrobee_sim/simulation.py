@@ -1,34 +1,28 @@
 """The simulation without transport: ISS walls + Astrobee(s) + an optional cargo bag in pybullet.
 
-One pybullet client per Simulation (DIRECT by default). `step()` advances one physics step with
+One pybullet client per Simulation (DIRECT by default); one of sim_node's backends (backend.py).
+The world is built from a typed `astrobee.scenario.Scenario` (loaded once with the overrides);
+a reset request is validated whole before the running world is cleared. `step()` advances one physics step with
 the held, clipped body-frame wrenches; the propulsion watchdog zeroes a robot's wrench when no
 command came for `watchdog_timeout` seconds. Deterministic for a given scenario, seed and
 command sequence.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from astrobee import config, flight_modes
+from astrobee.flight_modes import FlightMode
+from astrobee.scenario import Scenario, ScenarioError
 
-from .bags import Bag, BagError, make_bag
+from .backend import BagInfo, Contact, check_seed, resolve_scenario
+from .bags import Bag, BagState, make_bag
 from .robot import Robot
 from .world import World, build_pybullet
 
-
-class ScenarioError(ValueError):
-    """Unknown scenario or a scenario that cannot be built (bad bag model/variant...)."""
-
-
-@dataclass
-class Contact:
-    body_a: str
-    body_b: str
-    position: np.ndarray
-    normal: np.ndarray
-    normal_force: float
+__all__ = ["Contact", "ScenarioError", "Simulation", "sim_defaults", "station"]
 
 
 _WORLD_CACHE: dict = {}
@@ -53,87 +47,56 @@ def station(wall_thickness: float = 0.25) -> World:
 class Simulation:
     """World + robots + bag, stepped at `physics_rate` Hz."""
 
-    def __init__(self, scenario: str | dict = "node2_to_jem", seed: int = 0,
+    def __init__(self, scenario: str | Scenario = "node2_to_jem", seed: int = 0,
                  physics_rate: float | None = None, gui: bool = False, drag: bool = False,
                  bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, robots: list[str] | None = None,
                  flight_mode: str | None = None, wall_thickness: float | None = None,
-                 wall_bodies: int = 64, fem_solver: str | None = None):
+                 wall_bodies: int = 64, fem_solver: str | None = None,
+                 bag_mass: float | None = None):
+        """scenario: a name in config/scenarios (loaded with the bag_*/robots/flight_mode/
+        fem_solver overrides, which also apply to later resets by name) or a Scenario as is.
+        Raises ScenarioError for a bad scenario or seed before pybullet is started."""
+        self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
+                          "bag_resolution": bag_resolution, "bag_mass": bag_mass, "robots": robots,
+                          "flight_mode": flight_mode, "fem_solver": fem_solver}
+        sc = resolve_scenario(scenario, None, self.overrides)
+        seed = check_seed(seed)
+        defaults = sim_defaults()
+        self.dt = 1.0 / float(physics_rate or defaults.get("physics_rate", 350.0))
+        wall_thickness = float(wall_thickness or defaults.get("wall_thickness", 0.25))
         import pybullet as p
         self.p = p
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.gui = gui
-        defaults = sim_defaults()
-        self.dt = 1.0 / float(physics_rate or defaults.get("physics_rate", 350.0))
-        wall_thickness = float(wall_thickness or defaults.get("wall_thickness", 0.25))
         self.drag = drag
         self.world = station(wall_thickness)
         self.wall_bodies = wall_bodies
-        self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
-                          "bag_resolution": bag_resolution, "robots": robots,
-                          "flight_mode": flight_mode, "fem_solver": fem_solver}
         self.watchdog_timeout = float(config.astrobee().get("watchdog_timeout", 0.32))
         self._half_envelope = float(config.astrobee().get("envelope", 0.32)) / 2
         self.robots: dict[str, Robot] = {}
         self.bag: Bag | None = None
-        self.reset(scenario, seed)
+        self.scenario: Scenario | None = None
+        self.reset(sc, seed)
 
     # ---- setup ---------------------------------------------------------------------------
-    def load_scenario(self, scenario: str | dict) -> dict:
-        if isinstance(scenario, dict):
-            return scenario
-        try:
-            return config.scenario(scenario)
-        except config.ConfigError as exc:
-            raise ScenarioError(str(exc)) from exc
+    @property
+    def scenario_name(self) -> str:
+        return self.scenario.name
 
-    def reset(self, scenario: str | dict | None = None, seed: int | None = None, **overrides) -> None:
-        """Rebuild the world from a scenario (default: the current one) and a seed."""
-        self.overrides.update({k: v for k, v in overrides.items() if v is not None})
-        if scenario is None or scenario == "":
-            scenario = getattr(self, "scenario_name", "node2_to_jem")
-        sc = self.load_scenario(scenario)
-        seed = getattr(self, "seed", 0) if seed is None else int(seed)
-        bag_cfg = dict(sc.get("bag") or {})
-        o = self.overrides
-        if o.get("bag_model"):
-            if o["bag_model"] == "none":
-                bag_cfg = {}
-            else:
-                bag_cfg["model"] = o["bag_model"]
-        if bag_cfg and o.get("bag_variant"):
-            bag_cfg["variant"] = o["bag_variant"]
-        if bag_cfg and o.get("bag_resolution"):
-            bag_cfg["resolution"] = int(o["bag_resolution"])
-        if bag_cfg and o.get("fem_solver"):
-            bag_cfg["solver"] = o["fem_solver"]
-        mode = o.get("flight_mode") or sc.get("flight_mode")
-        try:
-            flight_modes.get(mode)
-        except flight_modes.UnknownFlightMode as exc:
-            raise ScenarioError(str(exc)) from exc
-        if bag_cfg:
-            from .bags import MODELS, handle_dirs
-            if bag_cfg.get("model", "rigid") not in MODELS:
-                raise ScenarioError(f"unknown bag model {bag_cfg.get('model')!r}; known: {', '.join(MODELS)}")
-            try:
-                handle_dirs(bag_cfg.get("variant", "front"))
-            except BagError as exc:
-                raise ScenarioError(str(exc)) from exc
-        robots_cfg = list(sc.get("robots") or [{"name": "", "position": config.waypoint("node_2").tolist(),
-                                                 "orientation": [0, 0, 0, 1]}])
-        if o.get("robots"):
-            names = list(o["robots"])
-            base = robots_cfg[0]
-            robots_cfg = [dict(robots_cfg[i]) if i < len(robots_cfg) else
-                          {**base, "position": list(np.add(base["position"], [0.7 * i, 0, 0]))}
-                          for i in range(len(names))]
-            for rc, n in zip(robots_cfg, names):
-                rc["name"] = n
-        # ---- build -----------------------------------------------------------------------
+    def reset(self, scenario: str | Scenario | None = None, seed: int | None = None) -> None:
+        """Rebuild the world from a scenario (None/'': the current one) and a seed (None: the
+        current one). The request is validated first: a bad one raises ScenarioError and leaves
+        the running world as it was."""
+        sc = resolve_scenario(scenario, self.scenario, self.overrides)
+        seed = check_seed(getattr(self, "seed", 0) if seed is None else seed)
+        self._build(sc, seed)
+
+    def _build(self, sc: Scenario, seed: int) -> None:
         p, c = self.p, self.client
-        fem = bag_cfg.get("model") == "fem"
-        soft = fem and bag_cfg.get("solver", "bullet") == "bullet"   # a pybullet soft body
+        bag = sc.bag
+        fem = bag is not None and bag.model == "fem"
+        soft = fem and bag.solver == "bullet"        # a pybullet soft body
         p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD if soft else 0, physicsClientId=c)
         p.setGravity(0, 0, 0, physicsClientId=c)
         p.setTimeStep(self.dt, physicsClientId=c)
@@ -145,31 +108,29 @@ class Simulation:
                                        per_body=1 if soft else self.wall_bodies)
         self._wall_set = frozenset(self.wall_ids)
         rng = np.random.default_rng(seed)
-        noise = float(sc.get("initial_position_noise", 0.0))
+        noise = sc.initial_position_noise
         self.robots = {}
-        for rc in robots_cfg:
-            pos = np.asarray(rc["position"], dtype=float) + rng.normal(0, noise, 3) * (noise > 0)
-            r = Robot(c, rc.get("name", ""), pos, rc.get("orientation", [0, 0, 0, 1]), mode, self.drag)
+        for rs in sc.robots:
+            pos = np.asarray(rs.position, dtype=float) + rng.normal(0, noise, 3) * (noise > 0)
+            r = Robot(c, rs.name, pos, list(rs.orientation), sc.flight_mode, self.drag)
             self.robots[r.name] = r
         self.bag = None
-        if bag_cfg:
+        if bag is not None:
             for r in self.robots.values():
                 r.deploy_arm(True, instant=True)
                 r.gripper(False, instant=True)
-            kw = {k: bag_cfg[k] for k in ("size", "mass") if k in bag_cfg}
-            if fem and "resolution" in bag_cfg:
-                kw["resolution"] = int(bag_cfg["resolution"])
+            kw: dict[str, Any] = {"size": list(bag.size), "mass": bag.mass}
             if fem:
-                kw["solver"] = bag_cfg.get("solver", "bullet")
-            self.bag = make_bag(bag_cfg.get("model", "rigid"), c, bag_cfg.get("variant", "front"), **kw)
+                if bag.resolution:
+                    kw["resolution"] = int(bag.resolution)
+                kw["solver"] = bag.solver
+            self.bag = make_bag(bag.model, c, bag.variant, **kw)
             self.bag.attach(list(self.robots.values()))
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=c)
         self.scenario = sc
-        self.scenario_name = scenario if isinstance(scenario, str) else sc.get("name", "custom")
         self.seed = seed
-        self.bag_cfg = bag_cfg
-        self.flight_mode = flight_modes.get(mode)
+        self.flight_mode = flight_modes.get(sc.flight_mode)
         self.time = 0.0
         self.steps = 0
         self._bag_memo = None
@@ -187,12 +148,19 @@ class Simulation:
         self.last_command[robot] = self.time
         return True
 
-    def set_flight_mode(self, name: str) -> None:
-        """Change every robot's flight mode (raises UnknownFlightMode)."""
+    def set_flight_mode(self, name: str, robot: str | None = None) -> None:
+        """Change one robot's flight mode, or every robot's (raises UnknownFlightMode, or
+        KeyError for an unknown robot)."""
         mode = flight_modes.get(name)
+        if robot is not None:
+            self.robots[robot].set_flight_mode(name)
+            return
         self.flight_mode = mode
         for r in self.robots.values():
             r.set_flight_mode(name)
+
+    def flight_mode_of(self, robot: str) -> FlightMode:
+        return self.robots[robot].mode
 
     # ---- stepping ------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
@@ -228,8 +196,25 @@ class Simulation:
         """(position, orientation [x,y,z,w], velocity, angular velocity), world frame."""
         return self.robots[robot].state()
 
-    def bag_state(self):
+    def robot_names(self) -> list[str]:
+        return list(self.robots)
+
+    def faulted(self, robot: str) -> bool:
+        return self.fault[robot]
+
+    def bag_state(self) -> BagState | None:
         return None if self.bag is None else self.bag.state()
+
+    def bag_points(self) -> np.ndarray | None:
+        return None if self.bag is None else self.bag.points()
+
+    def bag_info(self) -> BagInfo | None:
+        """Model facts of the bag: FEM node count, or the number of rigid parts."""
+        b = self.bag
+        if b is None:
+            return None
+        parts = len(b.points()) if b.model == "fem" else len(b.body_ids)
+        return BagInfo(b.model, b.variant, int(parts))
 
     def contacts(self) -> list[Contact]:
         """Contacts of the robots and the bag with the station walls.

@@ -1,10 +1,10 @@
 """Cargo-bag models sharing one interface (base.Bag): fem, constraint, composite, rigid."""
 from __future__ import annotations
 
-from .base import VARIANTS, Bag, BagError, BagState, handle_dirs
+from astrobee.scenario import BAG_MODELS as MODELS
+from astrobee.scenario import FEM_SOLVERS
 
-MODELS = ("fem", "constraint", "composite", "rigid")
-FEM_SOLVERS = ("bullet", "fast")
+from .base import VARIANTS, Bag, BagError, BagState, handle_dirs
 
 
 def make_bag(model: str, client: int, variant: str = "front", **kw) -> Bag:
