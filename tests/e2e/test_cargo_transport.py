@@ -221,3 +221,38 @@ def test_sigint_leaves_nothing_behind(tmp_path, config_dir, launches):
     assert summary["status"] == "interrupted"
     msgs = mcap_messages(run / "bag")
     assert len(msgs["/loc/truth/pose"]) > 10
+
+
+def test_bag_override_reaches_every_node(tmp_path, config_dir, launches):
+    """`bag_model:=` on a scenario without a bag: the sim builds the bag, publishes the scenario
+    it built, and the mission reports the bag and plans with its margin (issue 10)."""
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=short_hop", "bag_model:=rigid")
+    launches.append(launch)
+    code = launch.wait(timeout=240.0)
+    assert code == 0, "\n".join(launch.lines[-40:])
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["success"], summary["reason"]
+    leg = summary["legs"][0] if "legs" in summary else summary
+    assert leg["carrying_bag"] is True
+    assert leg["carry_extent"] == pytest.approx(0.05)
+    msgs = mcap_messages(run / "bag")
+    info = msgs["/sim/scenario"][-1]
+    assert info.carrying_bag and info.bag_model == "rigid" and info.name == "short_hop"
+    assert info.bag_mass == pytest.approx(10.0)
+    assert msgs["/sim/bag/state"], "the sim flew no bag"
+
+
+def test_bad_override_starts_nothing(tmp_path, config_dir):
+    """A bad launch argument is one line from the launcher; no process, no run folder."""
+    run = tmp_path / "run"
+    env = dict(os.environ, ASTROBEE_CONFIG_DIR=str(config_dir))
+    out = subprocess.run([sys.executable, "-m", "astrobee_bringup.cli", "launch", "cargo_transport",
+                          "scenario:=node2_to_jem", "bag_model:=nonsense", "--run-dir", str(run),
+                          "--port", str(free_port())],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode == 1
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "nonsense" in lines[0], out.stderr
+    assert "started" not in out.stdout
+    assert not run.exists()
