@@ -50,6 +50,38 @@ def rates_from_derivatives(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     return 2.0 * rot.multiply(qd, qc)[..., :3], 2.0 * rot.multiply(qdd, qc)[..., :3]
 
 
+def _vec_times_conj(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Vector part of p (x) conj(q) for column-stacked quaternions (4, M): -p_w q_v + q_w p_v - p_v x q_v."""
+    px, py, pz, pw = p
+    qx, qy, qz, qw = q
+    return np.stack([qw * px - pw * qx - (py * qz - pz * qy),
+                     qw * py - pw * qy - (pz * qx - px * qz),
+                     qw * pz - pw * qz - (px * qy - py * qx)])
+
+
+def normalised_rates_columns(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """normalised_rates on column-stacked arrays (4, M) -> (4, M), (3, M), (3, M): every
+    operation on contiguous rows (the fast layout for long samplings)."""
+    m = (q * q).sum(axis=0)
+    qq1 = (q * qd).sum(axis=0)
+    qq2 = (qd * qd).sum(axis=0) + (q * qdd).sum(axis=0)
+    r = 1.0 / np.sqrt(m)
+    r3 = r * r * r
+    qn = q * r
+    qnd = qd * r - q * (qq1 * r3)
+    qndd = qdd * r - qd * (2.0 * qq1 * r3) + q * ((3.0 * qq1 * qq1 * r * r - qq2) * r3)
+    return qn, 2.0 * _vec_times_conj(qnd, qn), 2.0 * _vec_times_conj(qndd, qn)
+
+
+def normalised_rates(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(unit quaternion, world w, world alpha) of the normalised path q/|q| from the raw
+    polynomial's value and first two time derivatives, rows of (M, 4) arrays."""
+    qn, w, a = normalised_rates_columns(q.T, qd.T, qdd.T)
+    return qn.T, w.T, a.T
+
+
 @dataclass
 class QuaternionPolynomial:
     """q(s) = sum_k c_k s^k, s = (t - t0) / duration in [0, 1], normalised when evaluated."""
@@ -88,18 +120,20 @@ class QuaternionPolynomial:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         T = self.duration
         s = np.clip((t - self.t0) / T, 0.0, 1.0)
-        q = self.raw(s)
-        qd = self.raw(s, 1) / T
-        qdd = self.raw(s, 2) / T**2
-        m = np.sum(q * q, axis=1, keepdims=True)
-        qq1 = np.sum(q * qd, axis=1, keepdims=True)
-        qq2 = np.sum(qd * qd, axis=1, keepdims=True) + np.sum(q * qdd, axis=1, keepdims=True)
-        r = 1.0 / np.sqrt(m)
-        qn = q * r
-        qnd = qd * r - q * qq1 * r**3
-        qndd = qdd * r - 2.0 * qd * qq1 * r**3 - q * qq2 * r**3 + 3.0 * q * qq1**2 * r**5
-        w, a = rates_from_derivatives(qn, qnd, qndd)
-        return qn, w, a
+        V = s[:, None] ** np.arange(6)
+        raw = V @ self.time_coefficients()
+        return normalised_rates(raw[:, :4], raw[:, 4:8], raw[:, 8:])
+
+    def time_coefficients(self) -> np.ndarray:
+        """(6, 12) monomial coefficients in s of [q, dq/dt, d2q/dt2] (raw, unnormalised)."""
+        c = np.asarray(self.coefficients, dtype=float)
+        T = self.duration
+        k = np.arange(6)[:, None]
+        d1 = np.zeros_like(c)
+        d1[:5] = k[1:] * c[1:] / T
+        d2 = np.zeros_like(c)
+        d2[:4] = k[2:] * (k[2:] - 1) * c[2:] / T**2
+        return np.hstack([c, d1, d2])
 
     def peak_rates(self, samples: int = 200) -> tuple[float, float]:
         """Largest |w| and |alpha| over the polynomial (dense sampling)."""

@@ -1,7 +1,9 @@
 """Trajectory: piecewise Bezier position + piecewise quaternion polynomial attitude, sampled by time.
 
 Position pieces and attitude pieces have their own time breaks (e.g. a reorientation while the
-position holds). Angular rates are world frame (see quaternion_poly).
+position holds). Angular rates are world frame (see quaternion_poly). Sampling is vectorised:
+every piece is turned once into monomial coefficients of its value and time derivatives
+(cached), and sorted sample times are evaluated piece by piece with one matrix product each.
 """
 from __future__ import annotations
 
@@ -10,7 +12,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import bezier
-from .quaternion_poly import QuaternionPolynomial
+from .quaternion_poly import QuaternionPolynomial, normalised_rates_columns
+
+
+def _product(c: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """c.T @ V; einsum's own loop for long V (a threaded BLAS call costs 20x more on a busy
+    machine at these thin shapes)."""
+    return c.T @ V if V.shape[1] <= 1024 else np.einsum("jk,jm->km", c, V)
 
 
 @dataclass
@@ -53,32 +61,74 @@ class Trajectory:
         end_a = max(a.t0 + a.duration for a in self.attitude)
         return float(max(end_p, end_a))
 
+    _cache: tuple | None = field(default=None, init=False, repr=False, compare=False)
+
+    def _tables(self) -> tuple:
+        """(position starts, durations, coefficients (P, 8, 9)), same for attitude (A, 6, 12);
+        rebuilt when the piece lists change."""
+        key = (id(self.position), len(self.position), id(self.attitude), len(self.attitude))
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        n = max(len(p.points) for p in self.position) - 1
+        pc = np.zeros((len(self.position), n + 1, 9))
+        for i, p in enumerate(self.position):
+            pts = np.asarray(p.points, dtype=float)
+            m = len(pts) - 1
+            for k in range(3):
+                if k <= m:
+                    pc[i, :m + 1 - k, 3 * k:3 * k + 3] = bezier.monomial_matrix(m, k) @ pts / p.duration ** k
+        ac = np.stack([a.time_coefficients() for a in self.attitude])
+        tables = (np.array([p.t0 for p in self.position]), np.array([p.duration for p in self.position]), pc,
+                  np.array([a.t0 for a in self.attitude]), np.array([a.duration for a in self.attitude]), ac)
+        self._cache = (key, tables)
+        return tables
+
     @staticmethod
-    def _index(t: np.ndarray, starts: np.ndarray) -> np.ndarray:
-        return np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(starts) - 1)
+    def _piecewise(t: np.ndarray, starts: np.ndarray, durs: np.ndarray, coef: np.ndarray) -> np.ndarray:
+        """Evaluate the piecewise polynomials at sorted times t, column-stacked: (coef.shape[2], len(t))."""
+        if len(starts) == 1:
+            cuts = np.array([], dtype=int)
+            s = (t - starts[0]) * (1.0 / durs[0])
+        else:
+            cuts = np.searchsorted(t, starts[1:], side="left")
+            idx = np.cumsum(np.bincount(cuts, minlength=len(t) + 1)[:len(t)])
+            s = (t - starts[idx]) / durs[idx]
+        np.clip(s, 0.0, 1.0, out=s)
+        V = np.empty((coef.shape[1], len(t)))
+        V[0] = 1.0
+        for j in range(1, coef.shape[1]):
+            np.multiply(V[j - 1], s, out=V[j])
+        if len(starts) == 1:
+            return _product(coef[0], V)
+        out = np.empty((coef.shape[2], len(t)))
+        lo = 0
+        for k, hi in enumerate(np.append(cuts, len(t))):
+            if hi > lo:
+                out[:, lo:hi] = _product(coef[k], V[:, lo:hi])
+            lo = max(lo, hi)
+        return out
 
     def sample(self, t) -> State:
         """States at times t (seconds from the trajectory start; clipped to [0, duration])."""
         t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
-        n = len(t)
-        pos, vel, acc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
-        ip = self._index(t, np.array([p.t0 for p in self.position]))
-        for k in np.unique(ip):
-            piece = self.position[k]
-            m = ip == k
-            s = np.clip((t[m] - piece.t0) / piece.duration, 0.0, 1.0)
-            pos[m] = bezier.evaluate(piece.points, s)
-            vel[m] = bezier.evaluate_derivative(piece.points, piece.duration, s, 1)
-            acc[m] = bezier.evaluate_derivative(piece.points, piece.duration, s, 2)
-        quat, om, al = np.zeros((n, 4)), np.zeros((n, 3)), np.zeros((n, 3))
-        ia = self._index(t, np.array([a.t0 for a in self.attitude]))
-        for k in np.unique(ia):
-            m = ia == k
-            quat[m], om[m], al[m] = self.attitude[k].evaluate(t[m])
-        # keep the quaternion sign continuous from piece to piece
-        flip = np.concatenate([[False], np.sum(quat[1:] * quat[:-1], axis=1) < 0])
-        sign = np.where(np.cumsum(flip) % 2 == 1, -1.0, 1.0)
-        return State(t, pos, vel, acc, quat * sign[:, None], om, al)
+        order = None
+        if len(t) > 1 and np.any(t[1:] < t[:-1]):
+            order = np.argsort(t, kind="stable")
+            t = t[order]
+        ps, pd, pc, as_, ad, ac = self._tables()
+        p = self._piecewise(t, ps, pd, pc)
+        raw = self._piecewise(t, as_, ad, ac)
+        quat, om, al = normalised_rates_columns(raw[:4], raw[4:8], raw[8:])
+        if len(as_) > 1:     # keep the quaternion sign continuous from piece to piece
+            flip = (quat[:, 1:] * quat[:, :-1]).sum(axis=0) < 0
+            if flip.any():
+                quat = quat * np.where(np.concatenate([[0], np.cumsum(flip)]) % 2 == 1, -1.0, 1.0)
+        p, quat, om, al = p.T, quat.T, om.T, al.T
+        if order is not None:
+            inv = np.empty_like(order)
+            inv[order] = np.arange(len(order))
+            t, p, quat, om, al = t[inv], p[inv], quat[inv], om[inv], al[inv]
+        return State(t, p[:, :3], p[:, 3:6], p[:, 6:], quat, om, al)
 
     def sample_rate(self, rate: float) -> State:
         """States every 1/rate seconds from 0 to the end (end included)."""
