@@ -1,0 +1,137 @@
+"""System identification of rollout model A's handle (reduced_model.HandleParams) from a bag
+simulation.
+
+Procedure (bench/sysid_bag.py runs it for every bag model and writes config/reduced_models.yaml):
+1. `record`: the PD tracker (tracking.Tracker, told the bag's mass) flies the robot through a
+   random sequence of rest-to-rest moves (`excitation`) around its start pose in Node 2 while
+   the bag model of a simulator swings behind it; robot and bag states are sampled at 62.5 Hz.
+   The simulator is duck-typed (astrobee_sim.Simulation: command/advance/robot_state/bag_state/
+   time/flight_mode), so this module never imports it.
+2. `fit`: the robot's recorded motion drives the spring-damper alone (reduced_model.simulate_bag);
+   least squares over log-stiffness, log-damping (3 body axes each) and the rest offset
+   minimises the bag-centre position error.
+3. `error`: the same prediction on a held-out motion (another seed) gives the identification
+   error that is reported (RMS and max of the bag-centre position error, m).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from astrobee import rotations as rot
+
+from .mass import MassProperties, with_bag
+from .pd import State
+from .reduced_model import HandleParams, simulate_bag
+from .reference import rest_to_rest
+from .tracking import Tracker
+
+RATE = 62.5  # Hz, the controller's rate
+
+
+@dataclass
+class Recording:
+    """Sampled robot and bag states (world frame) of one excitation run."""
+
+    t: np.ndarray
+    robot_position: np.ndarray
+    robot_velocity: np.ndarray
+    robot_orientation: np.ndarray   # (T, 4) [x,y,z,w]
+    bag_position: np.ndarray
+    bag_velocity: np.ndarray
+    bag_mass: float
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return np.array([rot.to_matrix(q) for q in self.robot_orientation])
+
+    def body_offsets(self) -> np.ndarray:
+        """Bag centre in the robot body frame at each sample (T, 3)."""
+        return np.einsum("tji,tj->ti", self.rotation, self.bag_position - self.robot_position)
+
+
+def excitation(seed: int, moves: int = 6, amplitude=(0.25, 0.25, 0.3),
+               durations=(3.0, 6.0)) -> list[tuple[np.ndarray, float]]:
+    """A random sequence of (offset from the start position (m), duration (s)) moves."""
+    rng = np.random.default_rng(seed)
+    amp = np.asarray(amplitude, float)
+    return [(rng.uniform(-amp, amp), float(rng.uniform(*durations))) for _ in range(moves)]
+
+
+def record(sim, robot_mass: MassProperties, moves: list[tuple[np.ndarray, float]],
+           hold: float = 1.0, robot: str = "") -> Recording:
+    """Fly `moves` (see `excitation`) with the PD tracker in `sim`, sampling at 62.5 Hz."""
+    bag = sim.bag
+    p0, q0, _, _ = sim.robot_state(robot)
+    st = sim.bag_state()
+    offset = rot.rotate_inverse(q0, st.position - p0)
+    r_rel = rot.to_matrix(q0).T @ rot.to_matrix(st.orientation)
+    tracker = Tracker(sim.flight_mode, with_bag(robot_mass, bag.mass, bag.size, offset, r_rel))
+    rows: list[tuple] = []
+    dt = 1.0 / RATE
+    prev = np.asarray(p0, float)
+    for off, dur in moves:
+        goal = np.asarray(p0, float) + off
+        traj = rest_to_rest(prev, goal, q0, q0, dur).shifted(sim.time)
+        tracker.follow(traj, sim.time)
+        end = sim.time + dur + hold
+        while sim.time < end:
+            p, q, v, w = sim.robot_state(robot)
+            b = sim.bag_state()
+            rows.append((sim.time, p, v, q, b.position, b.velocity))
+            state = State(np.asarray(p), np.asarray(v), np.asarray(q), rot.rotate_inverse(q, w))
+            out = tracker.update(state, sim.time, dt).output
+            sim.command(np.concatenate([out.force, out.torque]), robot)
+            sim.advance(dt)
+        prev = goal
+    t, rp, rv, rq, bp, bv = (np.array(c, float) for c in zip(*rows))
+    return Recording(t, rp, rv, rq, bp, bv, float(bag.mass))
+
+
+def predict(handle: HandleParams, rec: Recording) -> np.ndarray:
+    """Bag-centre positions (T, 3) the handle model predicts for a recording's robot motion."""
+    x, _ = simulate_bag(handle, rec.bag_mass, rec.t, rec.robot_position, rec.robot_velocity,
+                        rec.rotation, rec.bag_position[0], rec.bag_velocity[0])
+    return x
+
+
+def error(handle: HandleParams, rec: Recording) -> dict:
+    """Bag-centre position error of the model on a recording: RMS and max (m), and the RMS of
+    the bag's own excursion about its mean body-frame offset (what a rigid-offset model misses)."""
+    e = np.linalg.norm(predict(handle, rec) - rec.bag_position, axis=1)
+    off = rec.body_offsets()
+    swing = np.linalg.norm(off - off.mean(axis=0), axis=1)
+    return {"rms": float(np.sqrt(np.mean(e**2))), "max": float(e.max()),
+            "swing_rms": float(np.sqrt(np.mean(swing**2)))}
+
+
+def fit(recordings: list[Recording], starts=((1.0, 1.0, 0.1), (30.0, 10.0, 1.0),
+                                             (1000.0, 50.0, 1.0))) -> HandleParams:
+    """Least-squares handle parameters over recordings (see the module docstring): log
+    stiffness and log damping per body axis, the rest offset, and log drag. The problem has
+    local minima (a stiff handle fits the mean offset, a soft one the swing): one solve per
+    (stiffness, damping, drag) start, the best kept."""
+    fits = [_fit_from(recordings, *s) for s in starts]
+    return min(fits, key=lambda f: f[1])[0]
+
+
+def _fit_from(recordings: list[Recording], k0: float, c0: float,
+              drag0: float) -> tuple[HandleParams, float]:
+    from scipy.optimize import least_squares
+
+    d0 = np.mean([r.body_offsets().mean(axis=0) for r in recordings], axis=0)
+    x0 = np.concatenate([np.full(3, np.log(k0)), np.full(3, np.log(c0)), d0, [np.log(drag0)]])
+
+    def unpack(x: np.ndarray) -> HandleParams:
+        return HandleParams(np.exp(x[:3]), np.exp(x[3:6]), x[6:9], float(np.exp(x[9])))
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        h = unpack(x)
+        return np.concatenate([(predict(h, r) - r.bag_position).ravel() for r in recordings])
+
+    lo = np.concatenate([np.full(6, np.log(1e-2)), d0 - 0.3, [np.log(1e-3)]])
+    hi = np.concatenate([np.full(3, np.log(1e5)), np.full(3, np.log(1e4)), d0 + 0.3, [np.log(1e3)]])
+    sol = least_squares(residuals, np.clip(x0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi),
+                        x_scale="jac", max_nfev=120)
+    return unpack(sol.x), float(sol.cost)
