@@ -1,11 +1,18 @@
-"""sim_node: the Simulation served on the ROS 2 graph (thin wiring; physics lives in simulation.py).
+"""sim_node: a simulator backend served on the ROS 2 graph (thin wiring; physics lives behind the
+SimBackend protocol of backend.py: `backend:=pybullet` (simulation.py, the default) or
+`backend:=rigid` (rigid_backend.py, numpy rigid bodies, for graph tests)).
 
 Per robot namespace <ns> ("" for the default robot): publishes <ns>/loc/truth/pose,
 <ns>/loc/truth/twist (world-frame linear and angular velocity), <ns>/gnc/ekf (EkfState: world
 velocity, BODY omega), latched <ns>/mob/flight_mode and <ns>/sim/fault (propulsion watchdog);
 subscribes <ns>/gnc/ctl/command (FamCommand, BODY wrench); serves <ns>/mob/set_flight_mode.
 Global: /clock, /tf, /sim/bag/state, /sim/bag/mesh (mesh_rate), /sim/contacts, latched
-/sim/markers; services /sim/reset, /sim/set_flight_mode, /sim/control.
+/sim/markers and /sim/scenario (ScenarioInfo: the scenario as built, republished after every
+reset); services /sim/reset, /sim/set_flight_mode, /sim/control.
+
+Parameters are checked at start: a bad one ends the node with one line naming it (exit 1). A
+bad /sim/reset request (unknown scenario, a path for a name, a negative seed, an invalid
+scenario file) is refused with success false and the running world keeps going untouched.
 
 Clock modes: realtime (paced to the wall clock), fast (no pacing), lockstep (after publishing
 the state of tick k the sim waits, at most `lockstep_timeout` s of wall time, for a command
@@ -17,78 +24,159 @@ the lockstep command stamps, and a command counts for the current tick at most.
 """
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")    # before numpy: see astrobee_sim/__init__.py
 
 import numpy as np  # noqa: E402
 
-from astrobee import config, flight_modes
-from .robot import qrot
-from .simulation import ScenarioError, Simulation, sim_defaults
+from astrobee import config, flight_modes  # noqa: E402
+from astrobee import msgconv as mc  # noqa: E402
+from astrobee import scenario as scn  # noqa: E402
+from astrobee.scenario import Scenario, ScenarioError  # noqa: E402
+
+from .backend import BACKENDS, SimBackend, make_backend  # noqa: E402
+from .robot import qrot  # noqa: E402
+from .simulation import sim_defaults  # noqa: E402
 
 FAULT_WATCHDOG = 1
+CLOCK_MODES = ("realtime", "fast", "lockstep")
+MAX_CONTROL_STEPS = 100_000     # one /sim/control STEP request (~5 min of sim at 350 Hz)
+MAX_REPLY = 400                 # characters of a refused request echoed in a reply
 
 
-def _ns(name: str) -> str:
-    return f"/{name}" if name else ""
+class ParameterError(ValueError):
+    """A sim_node parameter with a bad value; the message names the parameter."""
 
 
-def _stamp(msg_stamp: Any, t_ns: int) -> None:
-    msg_stamp.sec, msg_stamp.nanosec = int(t_ns // 1_000_000_000), int(t_ns % 1_000_000_000)
+@dataclass(frozen=True)
+class SimOptions:
+    """sim_node's parameters, checked (see read_options)."""
+
+    backend: str
+    scenario: str
+    overrides: dict
+    seed: int
+    clock_mode: str
+    physics_rate: float
+    publish_rate: float
+    mesh_rate: float
+    lockstep_timeout: float
+    lockstep_start_timeout: float
+    command_max_lead: float
+    max_sim_time: float
+    gui: bool
+    drag: bool
 
 
-def _vec(dst: Any, v) -> None:
-    dst.x, dst.y, dst.z = float(v[0]), float(v[1]), float(v[2])
+def _ranged(name: str, value: Any, lo: float, hi: float, lo_open: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"parameter {name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v > hi or v < lo or (lo_open and v == lo):
+        rng = f"{'>' if lo_open else '>='} {lo:g} and <= {hi:g}"
+        raise ParameterError(f"parameter {name} must be {rng}, got {value!r}")
+    return v
 
 
-def _pose(dst: Any, p, q) -> None:
-    _vec(dst.position, p)
-    dst.orientation.x, dst.orientation.y, dst.orientation.z, dst.orientation.w = (float(x) for x in q)
+def _choice(name: str, value: Any, known: tuple[str, ...]) -> str:
+    v = str(value)
+    if v not in known:
+        raise ParameterError(f"parameter {name}: unknown value {v!r}; known: {', '.join(known)}")
+    return v
+
+
+def read_options(node: Any) -> SimOptions:
+    """Declare and check every parameter (ParameterError names the first bad one)."""
+    d = sim_defaults()
+
+    def par(name: str, default: Any) -> Any:
+        return node.declare_parameter(name, d.get(name, default)).value
+
+    backend = _choice("backend", par("backend", "pybullet"), BACKENDS)
+    scenario = str(par("scenario", "node2_to_jem"))
+    try:
+        scn.check_name(scenario)
+    except ScenarioError as exc:
+        raise ParameterError(f"parameter scenario: {exc}") from None
+    bag_model = str(par("bag_model", "") or "")
+    if bag_model:
+        _choice("bag_model", bag_model, scn.BAG_MODELS + ("none",))
+    bag_variant = str(par("bag_variant", "") or "")
+    if bag_variant:
+        _choice("bag_variant", bag_variant, scn.bag_variants())
+    fem_solver = str(par("fem_solver", "") or "")
+    if fem_solver:
+        _choice("fem_solver", fem_solver, scn.FEM_SOLVERS)
+    bag_resolution = par("bag_resolution", 0)             # FEM target nodes; 0: bags.yaml's
+    if bag_resolution:
+        bag_resolution = int(_ranged("bag_resolution", bag_resolution, *scn.RESOLUTION_RANGE))
+    bag_mass = float(par("bag_mass", 0.0) or 0.0)
+    if bag_mass:
+        bag_mass = _ranged("bag_mass", bag_mass, *scn.MASS_RANGE)
+    robots_param = str(par("robots", ""))       # comma list of robot names; "" = the scenario's
+    robots = [r.strip() for r in robots_param.split(",")] if robots_param.strip() else None
+    flight_mode = str(par("flight_mode", "") or "")
+    if flight_mode:
+        _choice("flight_mode", flight_mode, tuple(flight_modes.names()))
+    clock_mode = _choice("clock_mode", par("clock_mode", "realtime"), CLOCK_MODES)
+    physics_rate = _ranged("physics_rate", par("physics_rate", 350.0), 10.0, 10_000.0)
+    publish_rate = _ranged("publish_rate", par("publish_rate", 62.5), 1.0, 1000.0)
+    if physics_rate < publish_rate:
+        raise ParameterError(f"parameter physics_rate ({physics_rate:g} Hz) must be >= "
+                             f"publish_rate ({publish_rate:g} Hz)")
+    mesh_rate = _ranged("mesh_rate", par("mesh_rate", 10.0), 0.01, 1000.0)
+    lockstep_timeout = _ranged("lockstep_timeout", par("lockstep_timeout", 1.0), 0.0, 3600.0, True)
+    lockstep_start_timeout = _ranged("lockstep_start_timeout", par("lockstep_start_timeout", 30.0),
+                                     0.0, 3600.0, True)
+    # commands stamped further than this ahead of sim time are dropped (stale, pre-reset)
+    command_max_lead = _ranged("command_max_lead", par("command_max_lead", 0.5), 0.0, 3600.0, True)
+    seed = par("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ParameterError(f"parameter seed must be a non-negative integer, got {seed!r}")
+    max_sim_time = _ranged("max_sim_time", par("max_sim_time", 0.0), 0.0, 1e9)   # 0: no end
+    gui = bool(par("gui", False))
+    drag = bool(par("drag", False))
+    overrides = {"bag_model": bag_model or None, "bag_variant": bag_variant or None,
+                 "bag_resolution": bag_resolution or None, "bag_mass": bag_mass or None,
+                 "fem_solver": fem_solver or None, "robots": robots,
+                 "flight_mode": flight_mode or None}
+    return SimOptions(backend, scenario, overrides, int(seed), clock_mode, physics_rate,
+                      publish_rate, mesh_rate, lockstep_timeout, lockstep_start_timeout,
+                      command_max_lead, max_sim_time, gui, drag)
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= MAX_REPLY else text[:MAX_REPLY] + "..."
 
 
 class SimNode:
-    """Wires a Simulation to topics and services; callbacks never raise."""
+    """Wires a SimBackend to topics and services; callbacks never raise."""
 
-    def __init__(self, argv: list[str] | None = None) -> None:
+    def __init__(self, node: Any, backend: SimBackend, opts: SimOptions) -> None:
         import roszen
         from roszen import LATCHED
 
         self.roszen = roszen
-        self.node = n = roszen.Node("sim_node", argv=argv)
+        self.node = n = node
         self.log = n.get_logger()
-        d = sim_defaults()
-        par = lambda name, default: n.declare_parameter(name, d.get(name, default)).value  # noqa: E731
-        self.scenario = par("scenario", "node2_to_jem")
-        bag_model = par("bag_model", "")
-        bag_variant = par("bag_variant", "")
-        bag_resolution = int(par("bag_resolution", 0))
-        robots_param = str(par("robots", ""))       # comma list of robot names; "" = the scenario's
-        robots = [r.strip() for r in robots_param.split(",")] if robots_param.strip() else None
-        self.clock_mode = par("clock_mode", "realtime")
-        if self.clock_mode not in ("realtime", "fast", "lockstep"):
-            raise ValueError(f"clock_mode must be realtime, fast or lockstep, not {self.clock_mode!r}")
-        physics_rate = float(par("physics_rate", 350.0))
-        self.publish_rate = float(par("publish_rate", 62.5))
-        self.mesh_rate = float(par("mesh_rate", 10.0))
-        self.lockstep_timeout = float(par("lockstep_timeout", 1.0))
-        self.lockstep_start_timeout = float(par("lockstep_start_timeout", 30.0))
-        # commands stamped further than this ahead of sim time are dropped (stale, pre-reset)
-        self.command_max_lead_ns = int(float(par("command_max_lead", 0.5)) * 1e9)
-        seed = int(par("seed", 0))
-        gui = bool(par("gui", False))
-        drag = bool(par("drag", False))
-        flight_mode = par("flight_mode", "")
-        self.max_sim_time = float(par("max_sim_time", 0.0))   # 0: run until stopped
-        if physics_rate <= 0 or self.publish_rate <= 0 or physics_rate < self.publish_rate:
-            raise ValueError("physics_rate and publish_rate must be > 0 with physics_rate >= publish_rate")
-        self.sim = Simulation(self.scenario, seed=seed, physics_rate=physics_rate, gui=gui, drag=drag,
-                              bag_model=bag_model or None, bag_variant=bag_variant or None,
-                              bag_resolution=bag_resolution or None, robots=robots,
-                              flight_mode=flight_mode or None)
+        self.sim = backend
+        self.opts = opts
+        self.scenario = opts.scenario
+        self.clock_mode = opts.clock_mode
+        self.publish_rate = opts.publish_rate
+        self.mesh_rate = opts.mesh_rate
+        self.lockstep_timeout = opts.lockstep_timeout
+        self.lockstep_start_timeout = opts.lockstep_start_timeout
+        self.command_max_lead_ns = int(opts.command_max_lead * 1e9)
+        self.max_sim_time = opts.max_sim_time
+        self.names: list[str] = backend.robot_names()
         M = roszen.message_class
         self.M = {k: M(v) for k, v in {
             "clock": "rosgraph_msgs/msg/Clock", "pose": "geometry_msgs/msg/PoseStamped",
@@ -97,19 +185,21 @@ class SimNode:
             "bag": "astrobee_msgs/msg/BagState", "mesh": "astrobee_msgs/msg/BagMesh",
             "contacts": "astrobee_msgs/msg/Contacts", "contact": "astrobee_msgs/msg/Contact",
             "markers": "visualization_msgs/msg/MarkerArray", "marker": "visualization_msgs/msg/Marker",
-            "mode": "astrobee_msgs/msg/FlightMode", "fault": "astrobee_msgs/msg/Fault"}.items()}
+            "mode": "astrobee_msgs/msg/FlightMode", "fault": "astrobee_msgs/msg/Fault",
+            "scenario": "astrobee_msgs/msg/ScenarioInfo", "pose_": "geometry_msgs/msg/Pose"}.items()}
         self.pub_clock = n.create_publisher("rosgraph_msgs/msg/Clock", "/clock", roszen.CLOCK)
         self.pub_tf = n.create_publisher("tf2_msgs/msg/TFMessage", "/tf", 10)
-        self.pub_bag = n.create_publisher("astrobee_msgs/msg/BagState", "/sim/bag/state", 10)
-        self.pub_mesh = n.create_publisher("astrobee_msgs/msg/BagMesh", "/sim/bag/mesh", 2)
-        self.pub_contacts = n.create_publisher("astrobee_msgs/msg/Contacts", "/sim/contacts", 10)
-        self.pub_markers = n.create_publisher("visualization_msgs/msg/MarkerArray", "/sim/markers", LATCHED)
+        self.pub_bag = n.create_publisher("astrobee_msgs/msg/BagState", mc.BAG_STATE, 10)
+        self.pub_mesh = n.create_publisher("astrobee_msgs/msg/BagMesh", mc.BAG_MESH, 2)
+        self.pub_contacts = n.create_publisher("astrobee_msgs/msg/Contacts", mc.CONTACTS, 10)
+        self.pub_markers = n.create_publisher("visualization_msgs/msg/MarkerArray", mc.MARKERS, LATCHED)
+        self.pub_scenario = n.create_publisher("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO, LATCHED)
         self.robot_io: dict[str, dict] = {}
         self._make_robot_io()
-        n.create_service("astrobee_msgs/srv/Reset", "/sim/reset", self._on_reset)
+        n.create_service("astrobee_msgs/srv/Reset", mc.SIM_RESET, self._on_reset)
         n.create_service("astrobee_msgs/srv/SetFlightMode", "/sim/set_flight_mode",
                          lambda req: self._on_set_mode(req, None))
-        n.create_service("astrobee_msgs/srv/SimControl", "/sim/control", self._on_control)
+        n.create_service("astrobee_msgs/srv/SimControl", mc.SIM_CONTROL, self._on_control)
         self.paused = False
         self.pending_steps = 0
         self.tick = 0
@@ -118,31 +208,33 @@ class SimNode:
         self._sim0 = 0.0
         self._warned: dict[str, float] = {}
         self.publish_markers()
+        self.publish_scenario()
         self.publish_modes()
         self.publish_state()
-        self.log.info(f"sim up: scenario {self.sim.scenario_name}, robots {list(self.sim.robots)}, "
-                      f"bag {self.sim.scenario.bag.model if self.sim.scenario.bag else 'none'}, "
-                      f"clock {self.clock_mode}, physics {physics_rate:g} Hz")
+        bag = backend.scenario.bag
+        self.log.info(f"sim up: scenario {backend.scenario.name}, robots {self.names}, "
+                      f"bag {bag.model if bag else 'none'}, backend {opts.backend}, "
+                      f"clock {self.clock_mode}, physics {1.0 / backend.dt:g} Hz")
 
     # ---- wiring per robot --------------------------------------------------------------
     def _make_robot_io(self) -> None:
         n, roszen = self.node, self.roszen
-        for name in self.sim.robots:
+        for name in self.names:
             if name in self.robot_io:
                 continue
-            ns = _ns(name)
+            t = lambda rel, nm=name: mc.robot_topic(nm, rel)  # noqa: E731
             io = {
-                "pose": n.create_publisher("geometry_msgs/msg/PoseStamped", f"{ns}/loc/truth/pose", 10),
-                "twist": n.create_publisher("geometry_msgs/msg/TwistStamped", f"{ns}/loc/truth/twist", 10),
-                "ekf": n.create_publisher("astrobee_msgs/msg/EkfState", f"{ns}/gnc/ekf", 10),
-                "mode": n.create_publisher("astrobee_msgs/msg/FlightMode", f"{ns}/mob/flight_mode",
+                "pose": n.create_publisher("geometry_msgs/msg/PoseStamped", t(mc.POSE), 10),
+                "twist": n.create_publisher("geometry_msgs/msg/TwistStamped", t(mc.TWIST), 10),
+                "ekf": n.create_publisher("astrobee_msgs/msg/EkfState", t(mc.EKF), 10),
+                "mode": n.create_publisher("astrobee_msgs/msg/FlightMode", t(mc.FLIGHT_MODE),
                                            roszen.LATCHED),
-                "fault": n.create_publisher("astrobee_msgs/msg/Fault", f"{ns}/sim/fault", roszen.LATCHED),
-                "cmd_stamp": -1, "raw_stamp": -1, "fault_state": None, "topic": f"{ns}/gnc/ctl/command",
+                "fault": n.create_publisher("astrobee_msgs/msg/Fault", t(mc.FAULT), roszen.LATCHED),
+                "cmd_stamp": -1, "raw_stamp": -1, "fault_state": None, "topic": t(mc.COMMAND),
             }
-            n.create_subscription("astrobee_msgs/msg/FamCommand", f"{ns}/gnc/ctl/command",
+            n.create_subscription("astrobee_msgs/msg/FamCommand", t(mc.COMMAND),
                                   lambda msg, nm=name: self._on_command(nm, msg), 10)
-            n.create_service("astrobee_msgs/srv/SetFlightMode", f"{ns}/mob/set_flight_mode",
+            n.create_service("astrobee_msgs/srv/SetFlightMode", t(mc.SET_FLIGHT_MODE),
                              lambda req, nm=name: self._on_set_mode(req, nm))
             self.robot_io[name] = io
 
@@ -157,11 +249,11 @@ class SimNode:
         try:
             w = msg.wrench
             wrench = np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z], float)
-            stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+            stamp = mc.stamp_ns(msg.header.stamp)
         except (AttributeError, TypeError, ValueError) as exc:
             self._warn("badcmd", f"malformed command for robot {name!r} dropped: {exc}")
             return
-        if name not in self.sim.robots:
+        if name not in self.names:
             return
         now = self.now_ns()
         if stamp > now + self.command_max_lead_ns:
@@ -187,13 +279,13 @@ class SimNode:
 
     def _on_set_mode(self, req: Any, robot: str | None) -> Any:
         resp = self.roszen.response_class("astrobee_msgs/srv/SetFlightMode")()
+        if robot is not None and robot not in self.names:
+            resp.success, resp.message = False, f"robot {robot!r} is not in the current scenario"
+            return resp
         try:
-            if robot is None:
-                self.sim.set_flight_mode(req.flight_mode)
-            else:
-                self.sim.robots[robot].set_flight_mode(req.flight_mode)
+            self.sim.set_flight_mode(req.flight_mode, robot)
         except flight_modes.UnknownFlightMode as exc:
-            resp.success, resp.message = False, str(exc)
+            resp.success, resp.message = False, _short(str(exc))
             return resp
         self.publish_modes()
         resp.success, resp.message = True, f"flight mode {req.flight_mode}"
@@ -202,38 +294,46 @@ class SimNode:
     def _on_reset(self, req: Any) -> Any:
         resp = self.roszen.response_class("astrobee_msgs/srv/Reset")()
         try:
-            self.sim.reset(req.scenario or None, int(req.seed))
-        except (ScenarioError, config.ConfigError, ValueError) as exc:
-            resp.success, resp.message = False, str(exc)
-            self.log.error(f"reset refused: {exc}")
+            # the backend validates the whole request (name, file, seed) before it clears the
+            # world: a refused reset leaves the running world as it was
+            self.sim.reset(req.scenario or None, req.seed)
+        except (ScenarioError, config.ConfigError, ValueError, TypeError) as exc:
+            resp.success, resp.message = False, _short(f"reset refused: {exc}")
+            self._warn("reset", resp.message, every=0.5)
             return resp
+        self.names = self.sim.robot_names()
         self._make_robot_io()
         for io in self.robot_io.values():
             io["cmd_stamp"], io["raw_stamp"], io["fault_state"] = -1, -1, None
         self.tick = 0
         self._wall0, self._sim0 = time.monotonic(), 0.0
         self.publish_markers()
+        self.publish_scenario()
         self.publish_modes()
         self.publish_state()
-        resp.success, resp.message = True, f"reset to {self.sim.scenario_name} (seed {self.sim.seed})"
+        resp.success, resp.message = True, f"reset to {self.sim.scenario.name} (seed {self.sim.seed})"
         self.log.info(resp.message)
         return resp
 
     def _on_control(self, req: Any) -> Any:
         R = self.roszen.response_class("astrobee_msgs/srv/SimControl")
         resp = R()
-        if req.command == 0:
+        if req.command == mc.SimControl.PAUSE:
             self.paused = True
             resp.message = "paused"
-        elif req.command == 1:
+        elif req.command == mc.SimControl.RESUME:
             self.paused = False
             self._wall0, self._sim0 = time.monotonic(), self.sim.time
             resp.message = "resumed"
-        elif req.command == 2:
+        elif req.command == mc.SimControl.STEP:
             if not self.paused:
                 resp.success, resp.message = False, "STEP needs a paused simulation (send PAUSE first)"
                 return resp
             steps = max(1, int(req.steps))
+            if steps > MAX_CONTROL_STEPS:
+                resp.success = False
+                resp.message = f"steps {steps} > {MAX_CONTROL_STEPS}: ask for fewer per request"
+                return resp
             self.sim.step(steps)
             self.publish_state()
             resp.message = f"stepped {steps}"
@@ -241,12 +341,12 @@ class SimNode:
             resp.success, resp.message = False, f"unknown command {req.command} (0 PAUSE, 1 RESUME, 2 STEP)"
             return resp
         resp.success = True
-        _stamp(resp.sim_time, self.now_ns())
+        mc.set_stamp_ns(resp.sim_time, self.now_ns())
         return resp
 
     # ---- publishing --------------------------------------------------------------------
     def now_ns(self) -> int:
-        return int(round(self.sim.time * 1e9))
+        return mc.to_ns(self.sim.time)
 
     def _robot_msgs(self, name: str) -> dict:
         """The per-tick messages of one robot, built once (publish() serialises at once, so
@@ -285,11 +385,11 @@ class SimNode:
         if g is None:
             g = self._msgs = self._global_msgs()
         clk = g["clock"]
-        _stamp(clk.clock, t)
+        mc.set_stamp_ns(clk.clock, t)
         self.pub_clock.publish(clk)
         transforms = []
         positions = []
-        for name, r in self.sim.robots.items():
+        for name in self.names:
             io = self.robot_io[name]
             msgs = io.get("msgs")
             if msgs is None:
@@ -297,18 +397,18 @@ class SimNode:
             pos, q, v, w = self.sim.robot_state(name)
             positions.append(pos)
             ps, tw, ekf, ts = msgs["pose"], msgs["twist"], msgs["ekf"], msgs["tfs"]
-            _stamp(ps.header.stamp, t)               # shared by twist, ekf and tf
-            _pose(ps.pose, pos, q)                   # shared by ekf (and its rotation by tf)
+            mc.set_stamp_ns(ps.header.stamp, t)      # shared by twist, ekf and tf
+            mc.set_pose(ps.pose, pos, q)             # shared by ekf (and its rotation by tf)
             io["pose"].publish(ps)
-            _vec(tw.twist.linear, v)
-            _vec(tw.twist.angular, w)
+            mc.set_vec(tw.twist.linear, v)
+            mc.set_vec(tw.twist.angular, w)
             io["twist"].publish(tw)
-            _vec(ekf.velocity, v)
-            _vec(ekf.omega, qrot((-q[0], -q[1], -q[2], q[3]), w))      # world -> body
+            mc.set_vec(ekf.velocity, v)
+            mc.set_vec(ekf.omega, qrot((-q[0], -q[1], -q[2], q[3]), w))      # world -> body
             io["ekf"].publish(ekf)
-            _vec(ts.transform.translation, pos)
+            mc.set_vec(ts.transform.translation, pos)
             transforms.append(ts)
-            fault = self.sim.fault[name]
+            fault = self.sim.faulted(name)
             if fault != io["fault_state"]:
                 io["fault_state"] = fault
                 f = self.M["fault"]()
@@ -319,24 +419,24 @@ class SimNode:
                 f.message = (f"no command for {self.sim.watchdog_timeout:g} s: propulsion stopped"
                              if fault else "commands flowing")
                 io["fault"].publish(f)
-        bag = self.sim.bag
+        info = self.sim.bag_info()
         rc, bc = self.sim.clearance(positions)
-        if bag is not None:
-            st = bag.state()
+        if info is not None:
+            st = self.sim.bag_state()
             bs, bts = g["bag"], g["bag_tfs"]
-            _stamp(bs.header.stamp, t)
-            bs.model, bs.variant = bag.model, bag.variant
-            _pose(bs.pose, st.position, st.orientation)
-            _vec(bs.velocity, st.velocity)
-            _vec(bs.omega, st.omega)
+            mc.set_stamp_ns(bs.header.stamp, t)
+            bs.model, bs.variant = info.model, info.variant
+            mc.set_pose(bs.pose, st.position, st.orientation)
+            mc.set_vec(bs.velocity, st.velocity)
+            mc.set_vec(bs.omega, st.omega)
             bs.deformation = float(st.deformation)
             bs.attached = np.array(st.attached, dtype=bool)
             self.pub_bag.publish(bs)
-            _vec(bts.transform.translation, st.position)
+            mc.set_vec(bts.transform.translation, st.position)
             transforms.append(bts)
             if self.sim.time - self._last_mesh >= 1.0 / self.mesh_rate - 1e-9:
                 self._last_mesh = self.sim.time
-                pts = bag.points()
+                pts = self.sim.bag_points()
                 mm = self.M["mesh"]()
                 mm.header = bs.header
                 mm.num_nodes = len(pts)
@@ -346,13 +446,13 @@ class SimNode:
         tf.transforms = transforms
         self.pub_tf.publish(tf)
         cs = g["contacts"]
-        _stamp(cs.header.stamp, t)
+        mc.set_stamp_ns(cs.header.stamp, t)
         lst = []
         for c in self.sim.contacts():
             m = self.M["contact"]()
             m.body_a, m.body_b = c.body_a, c.body_b
-            _vec(m.position, c.position)
-            _vec(m.normal, c.normal)
+            mc.set_vec(m.position, c.position)
+            mc.set_vec(m.normal, c.normal)
             m.normal_force = float(c.normal_force)
             lst.append(m)
         cs.contacts = lst
@@ -361,18 +461,53 @@ class SimNode:
         self.pub_contacts.publish(cs)
 
     def publish_modes(self) -> None:
-        for name, r in self.sim.robots.items():
-            m, fm = self.M["mode"](), r.mode
-            _stamp(m.header.stamp, self.now_ns())
+        for name in self.names:
+            m, fm = self.M["mode"](), self.sim.flight_mode_of(name)
+            mc.set_stamp_ns(m.header.stamp, self.now_ns())
             m.name, m.control_enabled, m.speed = fm.name, fm.control_enabled, fm.speed
             m.collision_radius = fm.collision_radius
             m.tolerance_pos = m.tolerance_pos_endpoint = fm.tolerance_pos
             m.tolerance_att = fm.tolerance_att
             for k in ("att_kp", "att_ki", "omega_kd", "pos_kp", "pos_ki", "vel_kd"):
-                _vec(getattr(m, k), getattr(fm, k))
+                mc.set_vec(getattr(m, k), getattr(fm, k))
             m.hard_limit_vel, m.hard_limit_accel = fm.hard_limit_vel, fm.hard_limit_accel
             m.hard_limit_omega, m.hard_limit_alpha = fm.hard_limit_omega, fm.hard_limit_alpha
             self.robot_io[name]["mode"].publish(m)
+
+    def publish_scenario(self) -> None:
+        """Latched /sim/scenario: the scenario as built (overrides applied), for the controller
+        and the mission (they read the bag and the goal from here, not from config files)."""
+        sc: Scenario = self.sim.scenario
+        m = self.M["scenario"]()
+        mc.set_stamp_ns(m.header.stamp, self.now_ns())
+        m.header.frame_id = "world"
+        m.name, m.description = sc.name, sc.description
+        m.seed = int(self.sim.seed)
+        m.flight_mode = sc.flight_mode
+        m.robots = [r.name for r in sc.robots]
+        starts = []
+        for r in sc.robots:
+            ps = self.M["pose_"]()
+            mc.set_pose(ps, r.position, r.orientation)
+            starts.append(ps)
+        m.starts = starts
+        m.has_goal = sc.goal_position is not None
+        if m.has_goal:
+            mc.set_pose(m.goal, sc.goal_position, sc.goal_orientation)
+        else:
+            m.goal.orientation.w = 1.0
+        m.face_forward = bool(sc.face_forward)
+        m.carrying_bag = sc.bag is not None
+        info = self.sim.bag_info()
+        if sc.bag is not None:
+            m.bag_model, m.bag_variant = sc.bag.model, sc.bag.variant
+            m.bag_solver = sc.bag.solver if sc.bag.model == "fem" else ""
+            m.bag_mass = float(sc.bag.mass)
+            mc.set_vec(m.bag_size, sc.bag.size)
+            m.bag_nodes = int(info.nodes) if info is not None else 0
+        m.carry_extent = float(sc.carry_extent)
+        m.yaml = sc.to_yaml()
+        self.pub_scenario.publish(m)
 
     def publish_markers(self) -> None:
         from .world import module_colour
@@ -384,9 +519,9 @@ class SimNode:
             m = M["marker"]()
             m.header.frame_id = "world"
             m.ns, m.id, m.type, m.action = "keep_in", i, 1, 0           # CUBE, ADD
-            _vec(m.pose.position, (box[:3] + box[3:]) / 2)
+            mc.set_vec(m.pose.position, (box[:3] + box[3:]) / 2)
             m.pose.orientation.w = 1.0
-            _vec(m.scale, box[3:] - box[:3])
+            mc.set_vec(m.scale, box[3:] - box[:3])
             m.color.r, m.color.g, m.color.b = module_colour(mod)
             m.color.a = 0.15
             out.append(m)
@@ -394,7 +529,7 @@ class SimNode:
             m = M["marker"]()
             m.header.frame_id = "world"
             m.ns, m.id, m.type, m.action = "modules", i, 9, 0           # TEXT_VIEW_FACING
-            _vec(m.pose.position, mod["origin"])
+            mc.set_vec(m.pose.position, mod["origin"])
             m.pose.orientation.w = 1.0
             m.scale.z = 0.2
             m.color.r = m.color.g = m.color.b = m.color.a = 1.0
@@ -426,7 +561,7 @@ class SimNode:
         next_pub = time.monotonic() + 0.5
 
         def waiting():
-            want = [n for n, io in self.robot_io.items() if n in self.sim.robots and
+            want = [n for n, io in self.robot_io.items() if n in self.names and
                     (io["cmd_stamp"] >= 0 or self.node.count_publishers(io["topic"]) > 0)]
             if first and not want:
                 return ["(no controller yet)"]
@@ -478,13 +613,41 @@ class SimNode:
         self.sim.close()
 
 
+def build(argv: list[str]) -> SimNode:
+    """The roszen node, its checked parameters, the backend they ask for, wired together.
+    Raises ParameterError / ConfigError / ValueError (one line each) for a bad start."""
+    import roszen
+    node = roszen.Node("sim_node", argv=argv)
+    backend = None
+    try:
+        opts = read_options(node)
+        given = {k: v for k, v in opts.overrides.items() if v is not None}
+        try:
+            base = Scenario.load(opts.scenario)
+        except ScenarioError as exc:
+            raise ParameterError(f"parameter scenario: {exc}") from None
+        sc = base.override(**given)      # its ScenarioError names the override (robots, ...)
+        backend = make_backend(opts.backend, sc, opts.seed, physics_rate=opts.physics_rate,
+                               gui=opts.gui, drag=opts.drag, **opts.overrides)
+        return SimNode(node, backend, opts)
+    except BaseException:
+        if backend is not None:
+            backend.close()
+        node.destroy_node()
+        raise
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Entry point (`ros2 run astrobee_sim sim_node`): exit 0 when stopped, 1 for a bad start."""
+    from roszen.parameters import ParameterException
     argv = sys.argv if argv is None else argv
     try:
-        sn = SimNode(argv)
-    except (config.ConfigError, ScenarioError, flight_modes.UnknownFlightMode, ValueError) as exc:
-        print(f"sim_node: error: {exc}", file=sys.stderr)
-        return 2
+        sn = build(argv)
+    except (config.ConfigError, ValueError, ParameterException) as exc:
+        print(f"sim_node: error: {exc}", file=sys.stderr, flush=True)
+        from roszen import context
+        context.shutdown()
+        return 1
     try:
         sn.spin()
     except KeyboardInterrupt:
