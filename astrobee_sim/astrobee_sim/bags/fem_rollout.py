@@ -1,0 +1,126 @@
+"""K independent copies of robot + fast FEM bag stepped in one call, for rollouts (no pybullet).
+
+The robot is one rigid body (whole-robot mass and inertia from config/astrobee.yaml, the arm held
+rigid, the gripper a fixed point of the body); the bag is mass_spring's model with the same
+anchor springs, wall-slab and robot-box contacts as fem_fast.FastFemBag. All copies share one
+factored matrix: a step is a few array operations over (N, K, 3) plus one matrix product.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from astrobee import config
+
+from .mass_spring import Anchors, MassSpring
+from .node_contacts import collide_moving_boxes, collide_static_boxes
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products of (K, 4) quaternions [x,y,z,w]."""
+    ax, ay, az, aw = a.T
+    bx, by, bz, bw = b.T
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], 1)
+
+
+class FemRollout:
+    """K copies of (rigid robot, FEM bag): `step(wrench_body, n)` advances all of them."""
+
+    def __init__(self, springs: MassSpring, anchors: Anchors, grip_offsets: np.ndarray,
+                 walls: np.ndarray, box_half: np.ndarray, k: int, dt: float,
+                 margin: float = 0.006, friction: float = 0.5):
+        cfg = config.astrobee()
+        self.springs, self.anchors = springs, anchors
+        self.offsets = np.asarray(grip_offsets, dtype=float)      # (A, 3) body frame, from COM
+        self.walls, self.half = np.asarray(walls, dtype=float), np.asarray(box_half, dtype=float)
+        self.k, self.dt, self.margin, self.friction = int(k), float(dt), margin, friction
+        self.mass = float(cfg["mass"])
+        self.inertia = np.asarray(cfg["inertia"], dtype=float)    # diagonal, body frame
+        n = springs.n
+        self.x = np.zeros((n, self.k, 3))
+        self.v = np.zeros((n, self.k, 3))
+        self.pos = np.zeros((self.k, 3))                          # robot COM, world
+        self.q = np.tile([0.0, 0.0, 0.0, 1.0], (self.k, 1))
+        self.vel = np.zeros((self.k, 3))
+        self.omega = np.zeros((self.k, 3))                        # world frame
+        self.force = np.zeros((self.k, 3))                        # bag on robot, next step
+        self.torque = np.zeros((self.k, 3))
+        self.time = 0.0
+
+    @classmethod
+    def from_bag(cls, bag, robot, k: int, dt: float) -> "FemRollout":
+        """K copies of a FastFemBag and the robot holding its first handle, in their current
+        state (the robot's velocity and spin included)."""
+        from .fem_fast import quat_matrices
+        pos, q, vel, w = robot.state()
+        com = robot.com()
+        R = quat_matrices(q[None])[0]
+        g = bag._grasps[0]
+        t = bag._target[: len(g["nodes"]), 0]
+        anchors = Anchors(g["nodes"], bag._anchors.stiffness[: len(g["nodes"])],
+                          bag._anchors.damping[: len(g["nodes"])])
+        ro = cls(bag.springs, anchors, (t - com) @ R, bag.walls, bag.half, k, dt,
+                 bag.margin, bag.friction)
+        ro.x[...] = bag.x
+        ro.v[...] = bag.v
+        ro.pos[...] = com
+        ro.q[...] = q
+        ro.vel[...] = vel + np.cross(w, com - pos)
+        ro.omega[...] = w
+        return ro
+
+    # ---- state -----------------------------------------------------------------------------
+    _FIELDS = ("x", "v", "pos", "q", "vel", "omega", "force", "torque")
+
+    def snapshot(self) -> dict:
+        return {f: getattr(self, f).copy() for f in self._FIELDS} | {"time": self.time}
+
+    def restore(self, snap: dict) -> None:
+        for f in self._FIELDS:
+            getattr(self, f)[...] = snap[f]
+        self.time = snap["time"]
+
+    def bag_com(self) -> np.ndarray:
+        """(K, 3) centre of mass of each copy's bag."""
+        return self.x.mean(axis=0)
+
+    # ---- stepping --------------------------------------------------------------------------
+    def step(self, wrench_body: np.ndarray, n: int = 1) -> None:
+        """Advance every copy n steps holding body-frame wrenches (K, 6) (or one (6,) for all)."""
+        from .fem_fast import quat_matrices
+        h, m, inertia = self.dt, self.mass, self.inertia
+        wb = np.broadcast_to(np.asarray(wrench_body, dtype=float), (self.k, 6))
+        for _ in range(n):
+            R = quat_matrices(self.q)
+            f = np.einsum("kij,kj->ki", R, wb[:, :3]) + self.force
+            tau = np.einsum("kij,kj->ki", R, wb[:, 3:]) + self.torque
+            # rigid robot: semi-implicit Euler, Euler's equations in the body frame
+            self.vel += (h / m) * f
+            wbody = np.einsum("kji,kj->ki", R, self.omega)
+            tb = np.einsum("kji,kj->ki", R, tau) - np.cross(wbody, inertia * wbody)
+            wbody = wbody + h * tb / inertia
+            self.omega = np.einsum("kij,kj->ki", R, wbody)
+            self.pos += h * self.vel
+            half = 0.5 * h * self.omega
+            ang = np.linalg.norm(half, axis=1, keepdims=True)
+            s = np.where(ang > 1e-12, np.sin(ang) / np.maximum(ang, 1e-300), 1.0)
+            dq = np.concatenate([half * s, np.cos(ang)], axis=1)
+            self.q = _quat_mul(dq, self.q)
+            self.q /= np.linalg.norm(self.q, axis=1, keepdims=True)
+            R = quat_matrices(self.q)
+            # anchor targets on the (rigid) gripper
+            arm = np.einsum("kij,aj->aki", R, self.offsets)            # (A, K, 3)
+            target = self.pos[None] + arm
+            target_vel = self.vel[None] + np.cross(self.omega[None], arm)
+            x, v = self.x, self.v
+            x_prev = x.copy()
+            self.springs.step(x, v, h, self.anchors, target, target_vel)
+            collide_static_boxes(x.reshape(-1, 3), v.reshape(-1, 3), x_prev.reshape(-1, 3),
+                                 self.walls, self.margin, self.friction)
+            fc, tc = collide_moving_boxes(x, v, x_prev, self.pos, R, self.vel, self.omega,
+                                          self.half, self.margin, self.friction,
+                                          self.springs.node_mass, h, self.anchors.nodes)
+            fa = self.springs.anchor_forces(x, v, self.anchors, target, target_vel)
+            self.force = fa.sum(axis=0) + fc
+            self.torque = np.cross(arm, fa).sum(axis=0) + tc
+            self.time += h
