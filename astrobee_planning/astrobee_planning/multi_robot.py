@@ -142,12 +142,23 @@ class _Formation:
             bad = ~rs.contains_all(rp)
             if bad.any():
                 return f"{name} leaves the safe set at {np.round(rp[bad][0], 3).tolist()}"
-        m = len(p)
-        k = len(self.bag_pts)
-        bp = np.repeat(p, k, axis=0) + rot.rotate(np.repeat(q, k, axis=0), np.tile(self.bag_pts, (m, 1)))
-        bad = ~_in_region(bp)
-        if bad.any():
-            return f"the bag leaves the keep-in set at {np.round(bp[bad][0], 3).tolist()}"
+        # a bag whose 8 corners lie in one (convex) region box is inside it; only the other
+        # poses have their surface points checked against the union
+        corners = np.array(list(itertools.product((-1.0, 1.0), repeat=3))) * self.bag_half
+        cp = p[:, None, :] + np.einsum("mij,kj->mki", rot.to_matrix(q), corners)     # (M, 8, 3)
+        lo, hi = cp.min(axis=1), cp.max(axis=1)                                     # (M, 3)
+        b = _keep_in_region()
+        one = np.zeros(len(p), dtype=bool)
+        for box in b:
+            one |= np.all(lo >= box[:3] - 1e-9, axis=1) & np.all(hi <= box[3:] + 1e-9, axis=1)
+        rest = np.flatnonzero(~one)
+        if len(rest):
+            pr, qr = p[rest], q[rest]
+            m, k = len(pr), len(self.bag_pts)
+            bp = np.repeat(pr, k, axis=0) + rot.rotate(np.repeat(qr, k, axis=0), np.tile(self.bag_pts, (m, 1)))
+            bad = ~_in_region(bp)
+            if bad.any():
+                return f"the bag leaves the keep-in set at {np.round(bp[bad][0], 3).tolist()}"
         return None
 
     def turn_ok(self, p: np.ndarray, qa: np.ndarray, qb: np.ndarray) -> bool:
