@@ -156,6 +156,9 @@ class MpcLaw:
         if bag is None or not bag.attached or robot is None or bag.mass <= 0:
             self.bag, self.rest_offset = None, None
             return
+        select = getattr(self.model, "select_bag", None)
+        if select is not None and bag.model:
+            select(bag.model)
         offset, r_rel = bag.offset_in(robot)
         self.rest_offset = offset if self.rest_offset is None else \
             0.995 * self.rest_offset + 0.005 * offset

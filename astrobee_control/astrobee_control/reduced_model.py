@@ -125,12 +125,19 @@ class RolloutModel(Protocol):
 
 
 class ReducedModel:
-    """Rollout model A (see the module docstring), vectorised over candidates."""
+    """Rollout model A (see the module docstring), vectorised over candidates. `handles`
+    (bag model -> parameters) lets `select_bag` switch to the observed bag model's."""
 
     name = "reduced"
 
-    def __init__(self, handle: HandleParams) -> None:
+    def __init__(self, handle: HandleParams, handles: dict[str, HandleParams] | None = None) -> None:
         self.handle = handle
+        self.handles = dict(handles or {})
+
+    def select_bag(self, bag_model: str) -> None:
+        """Use the identified handle of `bag_model` when there is one."""
+        if bag_model in self.handles:
+            self.handle = self.handles[bag_model]
 
     def rollout(self, start: RolloutStart, refs: CandidateReferences, gains: Gains) -> Rollouts:
         """Roll every candidate reference out with the PD law on robot + spring-damper bag."""
@@ -220,3 +227,14 @@ def simulate_bag(handle: HandleParams, bag_mass: float, t: np.ndarray, robot_pos
         xb = xb + dt * vb
         out_x[i], out_v[i] = xb, vb
     return out_x, out_v
+
+
+def identified_handles() -> dict[str, HandleParams]:
+    """Handle parameters per bag model from config/reduced_models.yaml (bench/sysid_bag.py)."""
+    from astrobee import config
+    try:
+        data = config.load_yaml("reduced_models.yaml")
+    except config.ConfigError:
+        return {}
+    return {name: HandleParams.from_dict(d) for name, d in (data.get("handles") or {}).items()}
+

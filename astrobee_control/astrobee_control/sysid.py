@@ -133,5 +133,5 @@ def _fit_from(recordings: list[Recording], k0: float, c0: float,
     lo = np.concatenate([np.full(6, np.log(1e-2)), d0 - 0.3, [np.log(1e-3)]])
     hi = np.concatenate([np.full(3, np.log(1e5)), np.full(3, np.log(1e4)), d0 + 0.3, [np.log(1e3)]])
     sol = least_squares(residuals, np.clip(x0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi),
-                        x_scale="jac", max_nfev=120)
+                        x_scale="jac", max_nfev=80)
     return unpack(sol.x), float(sol.cost)
