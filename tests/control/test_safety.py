@@ -179,3 +179,16 @@ def test_flight_mode_off_brakes_nothing_and_stays_within_zero_limits():
     st = State(JEM, np.array([0.01, 0, 0]), rot.IDENTITY.copy(), np.zeros(3))
     res = filt.filter(np.array([0.5, 0, 0]), np.zeros(3), st)
     np.testing.assert_allclose(res.force, 0.0)
+
+
+def test_caller_boxes_restrict_the_candidates():
+    """At the JEM hatch moving toward Node 2 the default corridor boxes (the union goes on)
+    leave the command alone; given only the JEM's own keep-in box, the filter brakes."""
+    filt = SafetyFilter(flight_modes.get("nominal"), mp.robot(), margin=MARGIN)
+    st = State(np.array([10.93, -3.1, 4.85]), np.array([0.0, 0.1, 0.0]), rot.IDENTITY.copy(),
+               np.zeros(3))
+    f = np.array([0.0, 0.3, 0.0])
+    assert not filt.filter(f, np.zeros(3), st).active
+    jem_only = np.array([[9.85948, -9.23647, 3.78313, 11.99500, -2.75320, 5.91805]])
+    res = filt.filter(f, np.zeros(3), st, boxes=jem_only + np.array([-MARGIN] * 3 + [MARGIN] * 3))
+    assert res.active and res.force[1] < 0.3
