@@ -1,0 +1,79 @@
+"""MPC decision time per replan: rollout model A (reduced, one core) and model B (pybullet
+worker processes), N samples x 5 s horizon, robot + 10 kg bag in Node 2.
+
+    .venv/bin/python bench/mpc_bench.py [--samples 128] [--repeats 40] [--b-samples 32]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # one core for model A
+
+import numpy as np  # noqa: E402
+
+from astrobee import flight_modes  # noqa: E402
+from astrobee import rotations as rot  # noqa: E402
+from astrobee_control import mass as mp  # noqa: E402
+from astrobee_control.law import BagObservation  # noqa: E402
+from astrobee_control.mpc import MpcConfig, MpcLaw  # noqa: E402
+from astrobee_control.pd import State  # noqa: E402
+from astrobee_control.reduced_model import ReducedModel, identified_handles, HandleParams  # noqa: E402
+from astrobee_control.reference import rest_to_rest  # noqa: E402
+
+Q = np.array([0.0, 0.0, -0.7071067811865476, 0.7071067811865476])
+
+
+def timed(law: MpcLaw, repeats: int) -> np.ndarray:
+    p0 = np.array([10.95, 0.0, 4.84])
+    law.follow(rest_to_rest(p0, p0 + [0.0, -2.0, 0.0], Q, Q, 30.0), 0.0)
+    rng = np.random.default_rng(0)
+    out = []
+    for i in range(repeats):
+        st = State(p0 + rng.normal(0, 0.02, 3), rng.normal(0, 0.01, 3), Q, np.zeros(3))
+        d = np.array([-0.477, 0.0, -0.047])
+        bag = BagObservation(st.position + rot.rotate(Q, d), Q, rng.normal(0, 0.01, 3),
+                             np.zeros(3), True, 10.0, np.array([0.5, 0.42, 0.25]), "fem")
+        law.observe_bag(bag, st)
+        t = time.perf_counter()
+        law.decide(st, 0.5 * i)
+        out.append(time.perf_counter() - t)
+    return 1e3 * np.array(out)
+
+
+def row(name: str, ms: np.ndarray, target: str) -> None:
+    print(f"{name:44s} median {np.median(ms):8.1f} ms   p99 {np.percentile(ms, 99):8.1f} ms   "
+          f"{target}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--samples", type=int, default=128)
+    ap.add_argument("--repeats", type=int, default=40)
+    ap.add_argument("--b-samples", type=int, default=32)
+    a = ap.parse_args()
+    fm, m = flight_modes.get("nominal"), mp.robot()
+    handle = identified_handles().get("fem") or HandleParams([30, 1e5, 1.5], [20, 0.01, 1], 0)
+    cfg = MpcConfig(samples=a.samples, horizon=5.0)
+    print(f"MPC decision time per replan, {a.samples} samples x 5 s horizon "
+          f"(rollout step {cfg.rollout_dt} s), robot + 10 kg bag")
+    law = MpcLaw(fm, m, ReducedModel(handle), cfg)
+    timed(law, 3)
+    row(f"model A (reduced, numpy, one core), N={a.samples}", timed(law, a.repeats),
+        "target <= 50 ms; pyastrobee: not real time on 16 cores")
+    from astrobee_control.rollout_pybullet import PybulletModel
+    for bag in ("constraint",):
+        model = PybulletModel(workers=2, bag_model=bag)
+        try:
+            law_b = MpcLaw(fm, m, model, MpcConfig(samples=a.b_samples, horizon=5.0))
+            timed(law_b, 1)
+            ms = timed(law_b, max(3, a.repeats // 8))
+            row(f"model B (pybullet {bag}, 2 workers), N={a.b_samples}", ms,
+                f"(x{a.samples / a.b_samples:.0f} for N={a.samples}: ~{np.median(ms) * a.samples / a.b_samples / 1e3:.1f} s)")
+        finally:
+            model.close()
+
+
+if __name__ == "__main__":
+    main()
