@@ -269,3 +269,84 @@ def test_lockstep_drops_commands_from_before_a_reset(graph):
     g.sim.terminate()
     out, err = g.sim.communicate(timeout=10)
     assert "ahead of sim time" in out + err
+
+
+def _latest_scenario(g):
+    infos = []
+    g.node.create_subscription("astrobee_msgs/msg/ScenarioInfo", "/sim/scenario", infos.append,
+                               roszen.LATCHED)
+    return infos
+
+
+def test_bad_reset_is_refused_and_the_old_world_runs_on(graph):
+    """Issue 19 items 2 and 5: a bad /sim/reset (negative seed, a path for a name, an unknown
+    scenario) gets success false and the sim keeps publishing the world it had."""
+    import yaml
+
+    from astrobee.scenario import Scenario
+    g = graph("scenario:=node2_to_jem", "clock_mode:=realtime", "seed:=2")
+    infos = _latest_scenario(g)
+    poses = []
+    g.node.create_subscription("geometry_msgs/msg/PoseStamped", "/loc/truth/pose",
+                               lambda m: poses.append((m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,
+                                                       m.pose.position.x, m.pose.position.y)), 10)
+    assert g.spin_until(lambda: infos and len(poses) > 5, 30.0)
+    info = infos[-1]
+    assert info.name == "node2_to_jem" and info.seed == 2 and list(info.robots) == [""]
+    assert info.has_goal and not info.carrying_bag and info.flight_mode == "nominal"
+    assert Scenario.from_dict(yaml.safe_load(info.yaml), info.name) == Scenario.load("node2_to_jem")
+    for scenario, seed, needle in (("node2_to_jem_bag", -1, "seed"), ("../etc/passwd", 0, "scenario name"),
+                                   ("/etc/passwd", 0, "scenario name"),
+                                   ("no_such_scenario", 0, "no_such_scenario")):
+        r = g.call("astrobee_msgs/srv/Reset", "/sim/reset", scenario=scenario, seed=seed)
+        assert not r.success and needle in r.message, (scenario, r.message)
+        assert "root:" not in r.message                # nothing of the file echoed
+    t_refused = poses[-1][0]
+    assert g.spin_until(lambda: poses[-1][0] > t_refused + 200_000_000, 20.0)   # time runs on
+    assert g.sim.poll() is None
+    stamps = [t for t, _, _ in poses]
+    assert stamps == sorted(stamps)                     # never restarted: no reset happened
+    assert abs(poses[-1][1] - 10.95) < 0.05 and abs(poses[-1][2]) < 0.05   # the same robot
+    assert len(infos) == 1                              # the scenario was not republished
+    r = g.call("astrobee_msgs/srv/Reset", "/sim/reset", scenario="node2_to_jem_bag", seed=4)
+    assert r.success
+    assert g.spin_until(lambda: infos[-1].name == "node2_to_jem_bag", 10.0)
+    info = infos[-1]
+    assert info.seed == 4 and info.carrying_bag and info.bag_model == "rigid" and info.bag_nodes == 1
+    assert abs(info.bag_mass - 10.0) < 1e-9 and info.carry_extent > 0
+    assert abs(info.bag_size.x - 0.50) < 1e-9
+
+
+def test_rigid_backend_serves_the_robot_topics(graph):
+    g = graph("backend:=rigid", "scenario:=node2_to_jem_bag", "bag_mass:=12.5", "clock_mode:=fast")
+    got = {}
+    topics = {k: v for k, v in TOPICS.items() if k != "/sim/bag/mesh"}
+    topics["/sim/scenario"] = "astrobee_msgs/msg/ScenarioInfo"
+    for topic, typ in topics.items():
+        qos = roszen.LATCHED if topic in LATCHED | {"/sim/scenario"} else 10
+        g.node.create_subscription(typ, topic, lambda m, t=topic: got.setdefault(t, m), qos)
+    assert g.spin_until(lambda: len(got) == len(topics), 30.0), f"missing {set(topics) - set(got)}"
+    pose = got["/loc/truth/pose"].pose.position
+    assert abs(pose.x - 10.95) < 0.01 and abs(pose.y) < 0.01 and abs(pose.z - 4.84) < 0.01
+    assert got["/sim/scenario"].bag_mass == 12.5 and got["/sim/scenario"].carrying_bag
+    assert list(got["/sim/bag/state"].attached) == [True]
+    assert got["/sim/contacts"].robot_clearance > 0 and got["/sim/contacts"].bag_clearance > 0
+    faults = []
+    g.node.create_subscription("astrobee_msgs/msg/Fault", "/sim/fault", faults.append, roszen.LATCHED)
+    assert g.spin_until(lambda: any(f.active for f in faults), 20.0)      # the watchdog, no controller
+
+
+@pytest.mark.parametrize("param,needle", [
+    ("mesh_rate:=0", "mesh_rate"), ("publish_rate:=0.000001", "publish_rate"),
+    ("bag_resolution:=10000000", "bag_resolution"), ("bag_resolution:=-5", "bag_resolution"),
+    ("max_sim_time:=-1", "max_sim_time"), ("fem_solver:=warp", "fem_solver"),
+    ("bag_model:=nonsense", "bag_model"), ("backend:=ode", "backend"),
+])
+def test_bad_parameter_exits_1_with_one_line_naming_it(param, needle):
+    args = ["-m", "astrobee_sim.sim_node", "--ros-args", "-p", param]
+    e = testing.zenoh_env(testing.free_port())
+    r = subprocess.run(testing.python_cmd(*args), env=e, capture_output=True, text=True, timeout=60)
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("sim_node: error:")]
+    assert r.returncode == 1, r.stderr
+    assert len(lines) == 1 and needle in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
