@@ -10,7 +10,12 @@ spheres) and |R| bag_half (bag box); a translation leg is a time-optimal min-jer
 (global_planner) whose control points lie in those boxes, so both robots and the bag stay in
 the keep-in set by construction, and with the orientation fixed each robot's velocity and
 acceleration are the centre's. Turns are rest-to-rest quintic quaternion polynomials slowed so
-that |alpha| d + |w|^2 d <= a_max and |w| d <= v_max for the lever arm d = |offset|.
+that |alpha| d + |w|^2 d <= a_max and |w| d <= v_max for the lever arm d = |offset|. A turn
+is first tried overlapping the braking of the leg before it and the speeding up of the leg
+after it (no time held still for turning; the legs stay rest to rest at the turning point),
+the whole plan then slowed uniformly until the robots' shared limits hold; the shortest plan
+that passes the sampled check is kept, the stop-and-turn plan being the fallback. During such
+an overlap only the sampled check (not the construction) keeps robots and bag inside.
 The leg/turn sequence is a Dijkstra search over (orientation, box) with time costs; each turn is
 checked by sampling its swept robots and bag, failing turns are forbidden and the search
 repeated. The assembled plan is checked again by dense sampling (robot spheres, bag box
@@ -41,6 +46,10 @@ MIN_OVERLAP = 0.02       # m: boxes joined by a move or a turn overlap at least 
 BOX_COST = 0.5           # s added per box entered (fewer, longer legs)
 TURN_CHECK_STEPS = 40    # samples of a turn's sweep in the search
 MAX_SEARCHES = 40
+# (overlap, stretch) tried in order: a turn overlaps the neighbouring legs by up to `overlap`
+# of its duration on each side, slowed by `stretch`; (0, 1) is the stop-and-turn plan; the
+# shortest plan that passes the check is kept
+TURN_OVERLAPS = ((0.5, 1.0), (0.5, 1.3), (0.3, 1.3), (0.0, 1.0))
 
 
 @dataclass
@@ -355,11 +364,25 @@ def plan_two_robots(start_centre, start_quat, goal_centre, goal_quat, offset,
         forbidden.add(bad)
     else:
         raise PlanError(PLAN_FAILED, "no formation plan: every turn found sweeps out of the keep-in set")
-    traj, steps, route = _assemble(form, lim, path, p0, q0, p1, q1)
-    robots = [OffsetTrajectory(traj, offset), OffsetTrajectory(traj, -offset)]
-    bad = _violations(form, robots, mode, traj, samples)
-    if bad:
+    items, route = _items(form, lim, path, p0, q0, p1, q1)
+    best = None
+    for overlap, stretch in TURN_OVERLAPS:   # turning while moving, and at rest (0, 1)
+        traj, steps = _timeline(items, lim, p0, q0, overlap, stretch)
+        if overlap > 0:
+            # rotation and translation share the robots' acceleration: slow the whole plan
+            # down uniformly (same path) until every limit holds
+            k = _limit_scale(traj, offset, mode, samples) * 1.01
+            if best is not None and traj.duration * k >= best[0].duration:
+                continue
+            traj = _scaled(traj, k)
+            steps = steps + [f"all times x{k:.3f} (turns share the robots' acceleration)"]
+        robots = [OffsetTrajectory(traj, offset), OffsetTrajectory(traj, -offset)]
+        bad = _violations(form, robots, mode, traj, samples)
+        if not bad and (best is None or traj.duration < best[0].duration):
+            best = (traj, steps, robots)
+    if best is None:
         raise PlanError(PLAN_FAILED, "formation plan fails its check: " + "; ".join(bad))
+    traj, steps, robots = best
     traj.info.update(route=route, flight_mode=mode.name, steps=steps)
     centre = GlobalPlan(traj, None, route, time.perf_counter() - t_start)
     return FormationPlan(centre, robots, bag_half, steps)
@@ -380,29 +403,38 @@ def _first_bad_turn(form, path, q0, q1):
     return None
 
 
-def _assemble(form, lim, path, p0, q0, p1, q1):
-    """Trajectory of the bag centre from the searched path: legs planned by the global planner
-    in their orientation's safe boxes, turns in place between them."""
-    pos: list[BezierPiece] = []
-    att: list[QuaternionPolynomial] = []
-    steps: list[str] = []
+def _limit_scale(traj: Trajectory, offset: np.ndarray, mode, samples: int) -> float:
+    """Smallest uniform time scale (>= 1) after which the sampled robot speeds and accelerations
+    and the bag's angular rates are within the flight mode's limits."""
+    t = np.linspace(0.0, traj.duration, samples)
+    st = traj.sample(t)
+    k = max(1.0, float(np.max(np.linalg.norm(st.omega, axis=1))) / mode.hard_limit_omega,
+            np.sqrt(float(np.max(np.linalg.norm(st.alpha, axis=1))) / mode.hard_limit_alpha))
+    for sign in (1.0, -1.0):
+        rs = OffsetTrajectory(traj, sign * offset).sample(t)
+        k = max(k, float(np.max(np.linalg.norm(rs.vel, axis=1))) / mode.hard_limit_vel,
+                np.sqrt(float(np.max(np.linalg.norm(rs.acc, axis=1))) / mode.hard_limit_accel))
+    return k
+
+
+def _scaled(traj: Trajectory, k: float) -> Trajectory:
+    """The same path flown k times slower (every piece's start and duration times k)."""
+    pos = [BezierPiece(p.points, p.t0 * k, p.duration * k) for p in traj.position]
+    att = [QuaternionPolynomial(a.coefficients, a.t0 * k, a.duration * k) for a in traj.attitude]
+    return Trajectory(pos, att, traj.t_offset, dict(traj.info))
+
+
+def _items(form, lim, path, p0, q0, p1, q1) -> tuple[list, list[int]]:
+    """The searched path as ("leg", orientation index, spline, a, b) and ("turn", point, qa, qb)
+    items in order; legs planned by the global planner in their orientation's safe boxes."""
+    items: list = []
     route: list[int] = []
-    t = 0.0
-    q = q0
 
     def turn(p, qa, qb):
-        nonlocal t
-        if _angle(qa, qb) < 1e-6:
-            return
-        poly = lim.turn(qa, qb, t)
-        pos.append(BezierPiece(np.tile(p, (8, 1)), t, poly.duration))
-        att.append(poly)
-        steps.append(f"turn {np.degrees(_angle(qa, qb)):.0f} deg at {np.round(p, 2).tolist()} "
-                     f"({poly.duration:.1f} s)")
-        t += poly.duration
+        if _angle(qa, qb) >= 1e-6:
+            items.append(("turn", p, qa, qb))
 
     def leg(i, box_ids, pa, pb):
-        nonlocal t
         if np.linalg.norm(pb - pa) < 1e-4:
             return
         s = form.sets[form.cls[i]]
@@ -412,15 +444,8 @@ def _assemble(form, lim, path, p0, q0, p1, q1):
         except (PlanningError, bx.NoRoute, bx.OutsideSafeSet) as exc:
             raise PlanError(PLAN_FAILED, f"formation leg {np.round(pa, 2).tolist()} -> "
                                          f"{np.round(pb, 2).tolist()}: {exc}") from exc
-        sp = pp.spline
-        for k, t0 in enumerate(sp.t0):
-            pos.append(BezierPiece(sp.points[k].copy(), t + t0, sp.durations[k]))
-        z = np.zeros(3)
-        att.append(QuaternionPolynomial.from_boundary(ROT_QUATS[i], z, z, ROT_QUATS[i], z, z, sp.duration, t))
-        steps.append(f"move {np.linalg.norm(pb - pa):.2f} m to {np.round(pb, 2).tolist()} "
-                     f"({sp.duration:.1f} s)")
+        items.append(("leg", i, pp.spline, pa, pb))
         route.extend(int(box_ids[k]) for k in pp.route)
-        t += sp.duration
 
     (i, b), _, _ = path[0]
     turn(p0, q0, ROT_QUATS[i])
@@ -437,8 +462,67 @@ def _assemble(form, lim, path, p0, q0, p1, q1):
         else:   # goal
             leg(i, cur_boxes, pa, p1)
             turn(p1, q, q1)
+    return items, route
+
+
+def _timeline(items, lim, p0, q0, overlap: float, stretch: float):
+    """Trajectory of the bag centre from the items. A turn overlaps the end of the leg before it
+    and the start of the leg after it by up to `overlap` x its own duration on each side (the
+    formation turns while it slows down into and speeds up out of the turning point, where
+    its translation is slowest), its duration stretched by `stretch` when it overlaps; with
+    overlap 0 every turn is made at rest between the legs."""
+    pos: list[BezierPiece] = []
+    att: list[QuaternionPolynomial] = []
+    steps: list[str] = []
+    z = np.zeros(3)
+    t = 0.0                     # end of the translation so far
+    att_t, q_cur = 0.0, q0      # attitude defined up to att_t, q_cur from there
+    p_cur = p0
+    prev_leg_d = 0.0            # duration of the leg just flown (for the overlap)
+
+    def hold_att(t_end):
+        nonlocal att_t
+        if t_end > att_t + 1e-9:
+            att.append(QuaternionPolynomial.from_boundary(q_cur, z, z, q_cur, z, z, t_end - att_t, att_t))
+            att_t = t_end
+
+    pending = None              # a turn waiting for the next leg: (start, end)
+    for k, it in enumerate(items):
+        if it[0] == "turn":
+            _, p, qa, qb = it
+            nxt = items[k + 1] if k + 1 < len(items) else None
+            T = lim.turn(qa, qb, 0.0).duration
+            if overlap > 0:
+                T *= stretch
+            h_before = min(overlap * T, 0.45 * prev_leg_d, lim.v / lim.a)
+            ts = max(att_t, t - h_before)
+            hold_att(ts)
+            poly = lim.turn(qa, qb, ts) if overlap == 0 else reorientation(
+                qa, qb, lim.w, lim.al, t0=ts, min_duration=T)
+            att.append(poly)
+            att_t, q_cur = ts + poly.duration, qb
+            nxt_d = nxt[2].duration if nxt is not None and nxt[0] == "leg" else 0.0
+            h_after = min(overlap * poly.duration, 0.45 * nxt_d, lim.v / lim.a)
+            t_next = max(t, att_t - h_after)
+            moving = ts < t - 1e-9 or t_next < att_t - 1e-9
+            steps.append(f"turn {np.degrees(_angle(qa, qb)):.0f} deg at {np.round(p, 2).tolist()} "
+                         f"({poly.duration:.1f} s{', while moving' if moving else ''})")
+            if t_next > t + 1e-9:       # hold the position while the turn needs it
+                pos.append(BezierPiece(np.tile(p_cur, (8, 1)), t, t_next - t))
+                t = t_next
+        else:
+            _, i, sp, pa, pb = it
+            for j, t0 in enumerate(sp.t0):
+                pos.append(BezierPiece(sp.points[j].copy(), t + t0, sp.durations[j]))
+            steps.append(f"move {np.linalg.norm(pb - pa):.2f} m to {np.round(pb, 2).tolist()} "
+                         f"({sp.duration:.1f} s)")
+            t += sp.duration
+            p_cur, prev_leg_d = pb, sp.duration
+    if att_t > t + 1e-9:
+        pos.append(BezierPiece(np.tile(p_cur, (8, 1)), t, att_t - t))
+        t = att_t
+    hold_att(t)
     if not pos:
-        z = np.zeros(3)
         pos.append(BezierPiece(np.tile(p0, (8, 1)), 0.0, 1e-3))
         att.append(QuaternionPolynomial.from_boundary(q0, z, z, q0, z, z, 1e-3, 0.0))
-    return Trajectory(pos, att), steps, route
+    return Trajectory(pos, att), steps
