@@ -1,6 +1,7 @@
-"""Mission client + planner_node + pd_controller_node + recorder, each its own process, with a
-numpy stand-in for the simulator (tests/e2e/fake_sim.py): the chain flies a plan to the goal,
-writes summary.json and plot, and the bag decodes with mcap-ros2-support."""
+"""Mission client + planner_node + pd_controller_node + recorder, each its own process, with
+sim_node on its numpy rigid-body backend (backend:=rigid, lockstep; no pybullet): the chain
+flies a plan to the goal, writes summary.json and plot, and the bag decodes with
+mcap-ros2-support."""
 from __future__ import annotations
 
 import json
@@ -19,7 +20,6 @@ from roszen import testing  # noqa: E402
 
 pytestmark = pytest.mark.graph
 ROOT = Path(__file__).resolve().parents[2]
-HERE = Path(__file__).resolve().parent
 
 HOP = {"description": "hop from Node 2 toward the JEM hatch (tests)", "flight_mode": "nominal",
        "robots": [{"name": "", "position": [10.95, 0.5, 4.84],
@@ -29,7 +29,7 @@ HOP = {"description": "hop from Node 2 toward the JEM hatch (tests)", "flight_mo
                 "orientation": [0.0, 0.0, -0.7071067811865476, 0.7071067811865476]}}
 
 
-def test_mission_chain_with_fake_sim(tmp_path):
+def test_mission_chain_with_rigid_sim(tmp_path):
     cfg = tmp_path / "config"
     shutil.copytree(ROOT / "config", cfg)
     (cfg / "scenarios" / "hop.yaml").write_text(yaml.safe_dump(HOP))
@@ -40,8 +40,8 @@ def test_mission_chain_with_fake_sim(tmp_path):
         env = dict(testing.zenoh_env(port), ASTROBEE_CONFIG_DIR=str(cfg))
         py = sys.executable
         try:
-            for argv in ([py, str(HERE / "fake_sim.py"), "--position", "10.95", "0.5", "4.84",
-                          "--yaw", str(-np.pi / 2)],
+            for argv in ([py, "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "backend:=rigid",
+                          "-p", "scenario:=hop", "-p", "clock_mode:=lockstep"],
                          [py, "-m", "astrobee_planning.planner_node"],
                          [py, "-m", "astrobee_control.pd_controller_node", "--ros-args",
                           "-p", "use_sim_time:=true"],
