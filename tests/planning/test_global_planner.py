@@ -5,13 +5,35 @@ import pytest
 
 from astrobee import flight_modes
 from astrobee import rotations as rot
-from astrobee_planning import bezier, planner
+from astrobee_planning import bezier, boxes, planner
 from conftest import module_waypoints
 
 WPS = module_waypoints()
 PAIRS = list(itertools.combinations(sorted(WPS), 2))
 Q0 = rot.from_euler(0.0, 0.0, 0.3)
 Q1 = rot.from_euler(0.1, -0.2, 2.0)
+
+
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r = np.sqrt(1 - z * z)
+    phi = np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+SPHERE = np.vstack([_fibonacci_sphere(60), np.eye(3), -np.eye(3)])
+
+
+def _robot_inside_keep_in(pos: np.ndarray) -> np.ndarray:
+    """Per centre: every point of the robot's collision sphere (66 surface points incl. the six
+    axis extremes) in some keep-in box of config/iss.yaml (the raw boxes, not the planner's set)."""
+    keep_in = boxes.keep_in_boxes()
+    pts = (pos[:, None, :] + boxes.robot_radius() * SPHERE[None]).reshape(-1, 3)
+    inside = np.zeros(len(pts), dtype=bool)
+    for b in keep_in:
+        inside |= np.all((pts >= b[:3] - 1e-7) & (pts <= b[3:] + 1e-7), axis=1)
+    return inside.reshape(len(pos), -1).all(axis=1)
 
 
 def _check_plan(plan, p0, q0, p1, q1, mode, safe):
@@ -24,13 +46,17 @@ def _check_plan(plan, p0, q0, p1, q1, mode, safe):
     t = np.linspace(0.0, tr.duration, 4000)
     st = tr.sample(t)
     assert safe.contains_all(st.pos, tol=1e-7).all()
+    # the robot's sphere inside the keep-in boxes, densely (at most 2 cm between samples)
+    n = max(2000, int(np.linalg.norm(np.diff(st.pos, axis=0), axis=1).sum() / 0.02))
+    dense = tr.sample(np.linspace(0.0, tr.duration, n)).pos
+    assert _robot_inside_keep_in(dense).all()
     fm = flight_modes.get(mode)
     assert np.linalg.norm(st.vel, axis=1).max() <= fm.hard_limit_vel * (1 + 1e-9)
     assert np.linalg.norm(st.acc, axis=1).max() <= fm.hard_limit_accel * (1 + 1e-9)
     assert np.linalg.norm(st.omega, axis=1).max() <= fm.hard_limit_omega * (1 + 1e-9)
     assert np.linalg.norm(st.alpha, axis=1).max() <= fm.hard_limit_alpha * (1 + 1e-9)
-    # continuity of position..acceleration at the spline joints, attitude at its breaks
-    for k in range(3):
+    # continuity of position..jerk at the spline joints, attitude at its breaks
+    for k in range(4):
         for s in range(len(sp.durations) - 1):
             left = bezier.derivative_points(sp.points[s], sp.durations[s], k)[-1]
             right = bezier.derivative_points(sp.points[s + 1], sp.durations[s + 1], k)[0]
@@ -121,3 +147,47 @@ def test_boundary_velocity():
     pp = plan_position(WPS["us_lab"], WPS["jem"], 0.2, 0.0175, v0=v0, v1=v1)
     v = pp.spline.evaluate([0.0, pp.spline.duration], 1)
     np.testing.assert_allclose(v, [v0, v1], atol=1e-7)
+
+
+# issue 17: the paper's code's trajectory on each route (s), planned rest to rest, nominal
+PAPER = {("node_2", "jem"): 60.5, ("jem", "node_1"): 199.3, ("jem", "cupola"): 273.3,
+         ("eu_lab", "jem"): 98.8, ("us_lab", "node_3"): 87.6}
+
+
+@pytest.mark.parametrize("a,b", list(PAPER))
+def test_never_slower_than_the_paper_and_few_solves(a, b, safe):
+    plan = planner.plan_global(WPS[a], rot.IDENTITY, WPS[b], rot.IDENTITY, "nominal", safe=safe)
+    tr = plan.trajectory
+    assert tr.duration <= PAPER[(a, b)]
+    # a handful of QP solves, not a bisection; and no faster than the trapezoid bound allows
+    assert tr.info["solves"] <= 10
+    assert tr.duration >= tr.info["lower_bound"] > 0
+
+
+def test_peak_speed_reaches_the_limit_on_a_long_straight_leg(safe):
+    """Node 2 -> JEM is a straight 6 m leg: the plan cruises at the flight mode's speed, and
+    its duration is within 10% of the trapezoid's (41.4 s)."""
+    fm = flight_modes.get("nominal")
+    plan = planner.plan_global(WPS["node_2"], rot.IDENTITY, WPS["jem"], rot.IDENTITY, "nominal", safe=safe)
+    st = plan.trajectory.sample_rate(50.0)
+    assert np.linalg.norm(st.vel, axis=1).max() >= 0.99 * fm.hard_limit_vel
+    assert plan.trajectory.duration <= 1.1 * plan.trajectory.info["lower_bound"]
+
+
+def test_vectorised_sampling_matches_piecewise_evaluation(safe):
+    """Trajectory.sample (cached monomial tables, sorted or not) equals the Bezier and
+    quaternion polynomial pieces evaluated one by one."""
+    plan = planner.plan_global(WPS["jem"], Q0, WPS["cupola"], Q1, "nominal", face_forward=True, safe=safe)
+    tr = plan.trajectory
+    t = np.random.default_rng(3).uniform(0.0, tr.duration, 500)
+    st = tr.sample(t)
+    for i in range(0, 500, 7):
+        k = max(j for j, p in enumerate(tr.position) if p.t0 <= t[i])
+        p = tr.position[k]
+        s = np.clip((t[i] - p.t0) / p.duration, 0.0, 1.0)
+        np.testing.assert_allclose(st.pos[i], bezier.evaluate(p.points, [s])[0], atol=1e-9)
+        np.testing.assert_allclose(st.vel[i], bezier.evaluate_derivative(p.points, p.duration, [s], 1)[0], atol=1e-10)
+        np.testing.assert_allclose(st.acc[i], bezier.evaluate_derivative(p.points, p.duration, [s], 2)[0], atol=1e-10)
+        ka = max(j for j, a in enumerate(tr.attitude) if a.t0 <= t[i])
+        q = tr.attitude[ka].raw([np.clip((t[i] - tr.attitude[ka].t0) / tr.attitude[ka].duration, 0, 1)])[0]
+        assert abs(abs(st.quat[i] @ (q / np.linalg.norm(q))) - 1) < 1e-12

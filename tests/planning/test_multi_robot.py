@@ -89,3 +89,16 @@ def test_bad_formation_input():
         multi_robot.plan_two_robots(config.waypoint("node_2"), rot.IDENTITY, config.waypoint("jem"),
                                     rot.IDENTITY, OFF, "warp")
     assert exc.value.code == planner.INVALID_FLIGHT_MODE
+
+
+@pytest.mark.parametrize("a,b", [("node_2", "jem"), ("node_1", "node_3")])
+def test_formation_turns_while_moving_where_the_corridor_allows(a, b):
+    """The turns overlap the legs' braking and speeding up instead of holding still: no step
+    turns at rest, and the plan is shorter than flying legs and turns one after the other."""
+    f = multi_robot.plan_two_robots(config.waypoint(a), rot.IDENTITY, config.waypoint(b),
+                                    rot.IDENTITY, OFF, "nominal")
+    turns = [s for s in f.steps if s.startswith("turn")]
+    assert turns and all("while moving" in s for s in turns)
+    sequential = sum(float(s.rsplit("(", 1)[1].split(" s")[0]) for s in f.steps
+                     if s.startswith(("turn", "move")))
+    assert f.centre.trajectory.duration < sequential
