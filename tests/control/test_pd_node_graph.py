@@ -1,14 +1,16 @@
-"""pd_controller_node in its own process, driven in lockstep by a numpy rigid body in the test
-process acting as the simulator (router + controller + test node: three processes)."""
+"""pd_controller_node in its own process, closing the loop in lockstep with sim_node on its numpy
+rigid-body backend (backend:=rigid; router + sim + controller + test node: four processes). The
+robot starts where each test puts it (a scenario written to a copy of config/)."""
+import shutil
 import time
 
 import numpy as np
 import pytest
+import yaml
 
+from astrobee import config
 from astrobee import rotations as rot
-from astrobee_control import mass as mp
 from astrobee_control.reference import rest_to_rest
-from astrobee_control.rigid_body import RigidBody
 
 roszen = pytest.importorskip("roszen")
 from roszen import testing  # noqa: E402
@@ -17,50 +19,52 @@ pytestmark = pytest.mark.graph
 DT = 1.0 / 62.5
 
 
-class FakeSim:
-    """Publishes EkfState, waits for the command of that stamp, applies it to a rigid body."""
+class SimWatch:
+    """The test's view of the loop: poses and commands as they pass, the controller's
+    MotionState, and the segment publisher; waits are bounded in wall time and sim time."""
 
-    def __init__(self, node, body):
+    def __init__(self, node, procs):
         from roszen import Durability, QoSProfile
-        self.node, self.body, self.t = node, body, 0.0
-        self.Ekf = roszen.message_class("astrobee_msgs/msg/EkfState")
-        self.pub = node.create_publisher("astrobee_msgs/msg/EkfState", "/gnc/ekf", 10)
-        self.commands, self.states = {}, []
+        self.node, self.procs = node, procs
+        self.poses, self.forces, self.states = [], [], []
+        node.create_subscription("geometry_msgs/msg/PoseStamped", "/loc/truth/pose", self._on_pose, 50)
         node.create_subscription("astrobee_msgs/msg/FamCommand", "/gnc/ctl/command", self._on_cmd, 50)
         latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
         node.create_subscription("astrobee_msgs/msg/MotionState", "/mob/state",
                                  lambda m: self.states.append((int(m.state), m.fsm_event)), latched)
         self.seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", "/gnc/ctl/segment", latched)
 
-    def _on_cmd(self, m):
-        self.commands[(m.header.stamp.sec, m.header.stamp.nanosec)] = m
+    def _on_pose(self, m):
+        p = m.pose.position
+        self.poses.append((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, np.array([p.x, p.y, p.z])))
 
-    def tick(self, timeout=5.0):
-        s = self.body.state()
-        m = self.Ekf()
-        sec = int(self.t)
-        m.header.stamp.sec, m.header.stamp.nanosec = sec, int(round((self.t - sec) * 1e9))
-        key = (m.header.stamp.sec, m.header.stamp.nanosec)
-        m.pose.position.x, m.pose.position.y, m.pose.position.z = s.position
-        (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
-         m.pose.orientation.w) = s.orientation
-        m.velocity.x, m.velocity.y, m.velocity.z = s.velocity
-        m.omega.x, m.omega.y, m.omega.z = s.omega
+    def _on_cmd(self, m):
+        f = m.wrench.force
+        self.forces.append(np.array([f.x, f.y, f.z]))
+
+    @property
+    def t(self):
+        return self.poses[-1][0] if self.poses else -1.0
+
+    def position(self):
+        return self.poses[-1][1]
+
+    def spin_until(self, cond, timeout=120.0):
         end = time.monotonic() + timeout
-        next_pub = 0.0
-        while key not in self.commands:
-            if time.monotonic() > next_pub:  # resend until the controller is up and answers
-                self.pub.publish(m)
-                next_pub = time.monotonic() + 0.5
-            assert time.monotonic() < end, f"no command for stamp {key}"
+        while not cond():
+            for p in self.procs:
+                assert p.poll() is None, f"process exited {p.returncode}: {p.stderr.read()[-2000:]}"
+            assert time.monotonic() < end, "timed out"
             self.node.spin_once(timeout_sec=0.01)
-        c = self.commands.pop(key)
-        f = np.array([c.wrench.force.x, c.wrench.force.y, c.wrench.force.z])
-        tq = np.array([c.wrench.torque.x, c.wrench.torque.y, c.wrench.torque.z])
-        for _ in range(2):
-            self.body.step(f, tq, DT / 2)
-        self.t += DT
-        return c, f
+
+    def run_for(self, seconds, until=lambda: False):
+        """Let sim time advance by `seconds` (or until `until()`)."""
+        t_end = self.t + seconds
+        self.spin_until(lambda: self.t >= t_end or until())
+
+    def commanded(self):
+        """Wait for the controller to close the loop (its commands arriving)."""
+        self.spin_until(lambda: self.forces and self.t >= DT)
 
 
 def segment_msg(traj):
@@ -83,81 +87,90 @@ def segment_msg(traj):
 
 
 @pytest.fixture
-def graph():
+def graph(tmp_path):
+    """make(p0, q0) -> SimWatch: router, sim_node (rigid, lockstep) starting at p0/q0, the
+    controller, and the test node."""
+    cfg = tmp_path / "config"
+    shutil.copytree(config.config_dir(), cfg)
     with testing.router() as port:
-        env = testing.zenoh_env(port)
-        ctl = testing.spawn(testing.python_cmd("-m", "astrobee_control.pd_controller_node"), env)
-        ctx = roszen.Context(env=env)
-        node = roszen.Node("fake_sim", context=ctx)
+        env = dict(testing.zenoh_env(port), ASTROBEE_CONFIG_DIR=str(cfg))
+        procs, nodes = [], []
+
+        def make(p0, q0):
+            sc = {"description": "pd node test start", "flight_mode": "nominal", "bag": None,
+                  "robots": [{"name": "", "position": [float(x) for x in p0],
+                              "orientation": [float(x) for x in q0]}]}
+            (cfg / "scenarios" / "pd_test.yaml").write_text(yaml.safe_dump(sc))
+            procs.append(testing.spawn(testing.python_cmd(
+                "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "backend:=rigid",
+                "-p", "scenario:=pd_test", "-p", "clock_mode:=lockstep",
+                "-p", "lockstep_timeout:=20.0", "-p", "lockstep_start_timeout:=120.0"), env))
+            procs.append(testing.spawn(testing.python_cmd(
+                "-m", "astrobee_control.pd_controller_node", "--ros-args", "-p", "use_sim_time:=true"), env))
+            ctx = roszen.Context(env=env)
+            node = roszen.Node("pd_test", context=ctx)
+            nodes.append((node, ctx))
+            return SimWatch(node, procs)
         try:
-            yield node
+            yield make
         finally:
-            node.destroy_node()
-            ctx.shutdown()
-            code = testing.stop(ctl)
-            assert code is not None
+            for node, ctx in nodes:
+                node.destroy_node()
+                ctx.shutdown()
+            for p in procs:                  # the sim first: it waits on the controller
+                assert testing.stop(p) is not None
 
 
 def test_node_follows_segment_and_stops_at_goal(graph):
     q = rot.from_axis_angle([0, 0, 1], -np.pi / 2)  # yawed: world -y is body +x
     p0, p1 = np.array([10.95, 0.0, 4.84]), np.array([10.95, -1.0, 4.84])
-    body = RigidBody(mp.robot(), p0, q)
-    sim = FakeSim(graph, body)
-    for _ in range(10):
-        sim.tick(timeout=20.0)
+    sim = graph(p0, q)
+    sim.commanded()
+    sim.run_for(10 * DT)
     traj = rest_to_rest(p0, p1, q, q, 12.0)
+    k = len(sim.forces)
     sim.seg_pub.publish(segment_msg(traj))
-    forces = []
-    for _ in range(int(25.0 / DT)):
-        c, f = sim.tick()
-        forces.append(f)
-        graph.spin_once(timeout_sec=0)
-        if sim.states and sim.states[-1][0] == 2 and any(s == 9 for s, _ in sim.states):
-            break
+    sim.run_for(25.0, until=lambda: sim.states and sim.states[-1][0] == 2
+                and any(s == 9 for s, _ in sim.states))
+    sim.node.spin_once(timeout_sec=0)
     seq = [s for s, _ in sim.states]
     assert 9 in seq and seq[-1] == 2, seq
     assert seq.index(4, seq.index(9)) > seq.index(9)  # STOPPING after CONTROLLING
-    assert np.linalg.norm(body.state().position - p1) < 0.05
+    assert np.linalg.norm(sim.position() - p1) < 0.05
     # motion is along world -y = body +x: the accelerating force is mostly on body x
-    f = np.array(forces)
+    f = np.array(sim.forces[k:])
     assert np.max(f[:, 0]) > 5 * np.max(np.abs(f[:, 1]))
 
 
 def test_stop_service_holds_pose(graph):
     p0, p1 = np.zeros(3), np.array([2.0, 0.0, 0.0])
-    body = RigidBody(mp.robot(), p0, rot.IDENTITY)
-    sim = FakeSim(graph, body)
-    sim.tick(timeout=20.0)
+    sim = graph(p0, rot.IDENTITY)
+    sim.commanded()
     sim.seg_pub.publish(segment_msg(rest_to_rest(p0, p1, rot.IDENTITY, rot.IDENTITY, 20.0)))
-    for _ in range(int(8.0 / DT)):
-        sim.tick()
-    cli = graph.create_client("std_srvs/srv/Trigger", "/gnc/ctl/stop")
+    sim.run_for(8.0)
+    cli = sim.node.create_client("std_srvs/srv/Trigger", "/gnc/ctl/stop")
     assert cli.wait_for_service(timeout_sec=5.0)
     fut = cli.call_async(roszen.request_class("std_srvs/srv/Trigger")())
-    while not fut.done():  # keep the lockstep going while the service answers
-        sim.tick()
+    sim.spin_until(fut.done, 30.0)  # the lockstep goes on while the service answers
     assert fut.result().success
-    x_stop = body.state().position[0]
-    for _ in range(int(15.0 / DT)):
-        sim.tick()
-    graph.spin_once(timeout_sec=0.1)
+    x_stop = sim.position()[0]
+    sim.run_for(15.0)
+    sim.node.spin_once(timeout_sec=0.1)
     assert sim.states[-1][0] == 2  # STOPPED
-    assert abs(body.state().position[0] - x_stop) < 0.1
-    assert body.state().position[0] < 1.5
+    assert abs(sim.position()[0] - x_stop) < 0.1
+    assert sim.position()[0] < 1.5
 
 
 def test_bad_segment_rejected_node_keeps_holding(graph):
     p0 = np.array([1.0, 2.0, 3.0])
-    body = RigidBody(mp.robot(), p0, rot.IDENTITY)
-    sim = FakeSim(graph, body)
-    sim.tick(timeout=20.0)
+    sim = graph(p0, rot.IDENTITY)
+    sim.commanded()
     seg = segment_msg(rest_to_rest(p0, p0 + 1.0, rot.IDENTITY, rot.IDENTITY, 5.0))
     seg.segment[3].pose.position.x = float("nan")
     sim.seg_pub.publish(seg)
-    for _ in range(int(3.0 / DT)):
-        sim.tick()
-    graph.spin_once(timeout_sec=0.1)
+    sim.run_for(3.0)
+    sim.node.spin_once(timeout_sec=0.1)
     assert any("rejected" in e for _, e in sim.states), sim.states
     assert 9 not in [s for s, _ in sim.states]  # never CONTROLLING
     assert sim.states[-1][0] == 2  # still holding (STOPPED)
-    assert np.linalg.norm(body.state().position - p0) < 1e-3
+    assert np.linalg.norm(sim.position() - p0) < 1e-3
