@@ -37,6 +37,7 @@ BOX_EPS = 1e-6          # m, control points kept this far inside their box
 MAX_LEG = 2.0           # m: cruise legs are split into segments at most this long
 CORNER_REACH = 1.0      # share of the shorter leg near a corner left free (the curve cuts it)
 DV_FRACTION = 0.34      # a segment changes speed by at most this share of v_max
+MIN_SEGMENT_TIME = 0.2  # x v/a: shortest segment the profile makes inside a leg
 MAX_SEGMENTS = 40       # split no further than this many segments in all (QP size)
 RETIME_STEPS = 7        # retiming solves after the first (stops early without progress)
 TRACK_WEIGHT = 1.0      # pull of the straight-leg joints to the speed profile's points
@@ -212,7 +213,7 @@ class SplineQP:
         else:
             self.solver.update(P=px, A=ax, b=b)
         res = self.solver.solve()
-        if "Infeasible" in str(res.status) or res.x is None or len(res.x) != self.nx:
+        if str(res.status) not in ("Solved", "AlmostSolved") or res.x is None or len(res.x) != self.nx:
             return None
         x = np.asarray(res.x).reshape(3, self.S, self.N).transpose(1, 2, 0)
         if not np.all(np.isfinite(x)):
@@ -311,13 +312,17 @@ def profile_segments(poly: np.ndarray, vertex_speed: np.ndarray, v: float, a: fl
         for j in range(1, nd + 1):
             vj = vp - j * (vp - vb) / nd
             marks.append((la + lc + (vp * vp - vj * vj) / (2 * a), t_c + (vp - vj) / a))
-        # merge marks closer than 2 cm (the last one is the leg's end)
+        # drop marks closer in time than min_dt to the previous one (short segments make the
+        # QP's jerk weights, 1/T^5, badly conditioned); the leg's end is always kept
+        min_dt = MIN_SEGMENT_TIME * v / a
         keep = [marks[0]]
-        for m in marks[1:]:
-            if m[0] - keep[-1][0] < 0.02 and len(keep) > 1:
-                keep[-1] = m
-            elif m[0] - keep[-1][0] >= 0.02 or m is marks[-1]:
+        for m in marks[1:-1]:
+            if m[1] - keep[-1][1] >= min_dt:
                 keep.append(m)
+        if len(keep) > 1 and marks[-1][1] - keep[-1][1] < min_dt:
+            keep[-1] = marks[-1]
+        else:
+            keep.append(marks[-1])
         keep[-1] = (L, keep[-1][1])
         u = (poly[i + 1] - poly[i]) / max(L, 1e-12)
         for (d0, t0), (d1, t1) in zip(keep[:-1], keep[1:]):
