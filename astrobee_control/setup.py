@@ -23,6 +23,8 @@ setup(
     entry_points={
         "console_scripts": [
             'pd_controller_node = astrobee_control.pd_controller_node:main',
+            'mpc_controller_node = astrobee_control.mpc_controller_node:main',
+            'safety_filter_node = astrobee_control.safety_filter_node:main',
         ],
     },
 )

@@ -1,0 +1,250 @@
+"""safety_filter_node: the CBF-QP safety filter (safety/filter.py) between a controller and the
+robot (issue 16).
+
+Subscribes <ns>/gnc/ctl/command_nominal (FamCommand, the controller's BODY-frame wrench),
+<ns>/gnc/ekf (EkfState: position, velocity (world), orientation, omega (body)),
+<ns>/mob/flight_mode (latched: the force/torque limits), /sim/scenario (latched: carrying_bag,
+bag_size, bag_mass) and /sim/bag/state (the bag pose: where its extent sits relative to the robot
+while attached). For each nominal command publishes the filtered FamCommand on
+<ns>/gnc/ctl/command with the same header stamp (the sim's lockstep waits for that stamp) and
+every other field copied; before any state has arrived the nominal command passes unchanged.
+Latched diagnostics on <ns>/gnc/ctl/safety (diagnostic_msgs/DiagnosticArray, one status: OK,
+WARN when the filter changed the command, ERROR when it fell back to the maximum braking wrench;
+values active, delta_norm, slack, min_barrier, fallback, reason), published when the
+active/fallback state changes and at most `diagnostics_rate` Hz otherwise.
+
+Callbacks never raise: a bad or non-finite sample is logged and dropped.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from astrobee import flight_modes
+from astrobee import msgconv as mc
+from astrobee import rotations as rot
+from roszen import node_main
+
+from . import mass as mp
+from .pd import State
+from .safety import SafetyFilter, box_corners, carried_load
+
+COMMAND_NOMINAL = "gnc/ctl/command_nominal"   # the controller's command, before the filter
+SAFETY = "gnc/ctl/safety"                     # latched diagnostics (DiagnosticArray)
+OK, WARN, ERROR = 0, 1, 2                     # diagnostic_msgs/DiagnosticStatus levels
+STATE_MAX_AGE = 0.5                           # s of sim time: an older state is not used
+
+PARAMETERS: dict[str, Any] = {
+    "flight_mode": "",              # "" = nominal until /mob/flight_mode says otherwise
+    "margin": 0.05,                 # m the filter's boundary sits outside the keep-in boxes
+    "bag_mass": -1.0,               # kg; < 0 = the scenario's
+    "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
+    "diagnostics_rate": 2.0,        # Hz at most for unchanged diagnostics
+}
+
+
+class SafetyFilterNode:
+    """Wiring of one SafetyFilter to topics."""
+
+    def __init__(self, argv: list[str] | None = None) -> None:
+        import roszen
+        from roszen import LATCHED
+
+        self.node = n = roszen.Node("safety_filter", argv=argv)
+        self.log = n.get_logger()
+        values = {k: n.declare_parameter(k, d).value for k, d in PARAMETERS.items()}
+        mode = flight_modes.get(str(values["flight_mode"]) or None)
+        margin = float(values["margin"])
+        if not (np.isfinite(margin) and 0.0 <= margin < 0.5):
+            raise ValueError(f"margin must be in [0, 0.5) m, not {margin}")
+        self.bag_mass_param = float(values["bag_mass"])
+        size = list(values["bag_size"])
+        self.bag_size_param = (np.asarray(size, float) if len(size) == 3 and all(s > 0 for s in size)
+                               else None)
+        rate = float(values["diagnostics_rate"])
+        self.diag_period = 1.0 / rate if rate > 0 else float("inf")
+        self.robot_mass = mp.robot()
+        self.filter = SafetyFilter(mode, self.robot_mass, margin=margin)
+        self.scenario_bag: tuple[float, np.ndarray] | None = None
+        self.extent: list = []
+        self._bag_key: tuple | None = None       # rounded offset/rotation of the carried bag
+        self._state: State | None = None
+        self._state_t: float | None = None
+        self._diag_key: tuple[bool, bool] | None = None
+        self._diag_t = -1e9
+        self.ticks = self.active_ticks = self.fallback_ticks = 0
+
+        M = roszen.message_class
+        self.FamCommand = M("astrobee_msgs/msg/FamCommand")
+        self.DiagnosticArray = M("diagnostic_msgs/msg/DiagnosticArray")
+        self.DiagnosticStatus = M("diagnostic_msgs/msg/DiagnosticStatus")
+        self.KeyValue = M("diagnostic_msgs/msg/KeyValue")
+        self.pub_cmd = n.create_publisher("astrobee_msgs/msg/FamCommand", mc.COMMAND, 10)
+        self.pub_diag = n.create_publisher("diagnostic_msgs/msg/DiagnosticArray", SAFETY, LATCHED)
+        n.create_subscription("astrobee_msgs/msg/EkfState", mc.EKF, self._on_ekf, 10)
+        n.create_subscription("astrobee_msgs/msg/FlightMode", mc.FLIGHT_MODE, self._on_flight_mode,
+                              LATCHED)
+        n.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO, self._on_scenario,
+                              LATCHED)
+        n.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
+        n.create_subscription("astrobee_msgs/msg/FamCommand", COMMAND_NOMINAL, self._on_command, 10)
+        self.log.info(f"safety filter up: flight mode {mode.name}, margin {margin:.2f} m, "
+                      f"{len(self.filter.boxes)} candidate boxes")
+
+    # ---- inputs -----------------------------------------------------------------------
+    def _on_flight_mode(self, msg: Any) -> None:
+        try:
+            self.filter.set_flight_mode(flight_modes.get(msg.name))
+            self.log.info(f"flight mode {msg.name}")
+        except (flight_modes.UnknownFlightMode, AttributeError, TypeError, ValueError) as exc:
+            self.log.error(f"flight mode dropped: {exc}")
+
+    def _on_scenario(self, msg: Any) -> None:
+        try:
+            if msg.carrying_bag:
+                size = mc.vec(msg.bag_size)
+                if not (np.isfinite(msg.bag_mass) and msg.bag_mass > 0 and np.all(size > 0)
+                        and np.all(np.isfinite(size))):
+                    raise ValueError(f"bag mass {msg.bag_mass} / size {size.tolist()}")
+                self.scenario_bag = (float(msg.bag_mass), size)
+            else:
+                self.scenario_bag = None
+                self._release()
+        except (AttributeError, TypeError, ValueError) as exc:
+            self.log.warn(f"bad scenario description dropped: {exc}")
+
+    def _bag_figures(self) -> tuple[float, np.ndarray] | None:
+        base = self.scenario_bag
+        mass = self.bag_mass_param if self.bag_mass_param > 0 else (base[0] if base else None)
+        size = self.bag_size_param if self.bag_size_param is not None else (base[1] if base else None)
+        return None if mass is None or size is None else (mass, size)
+
+    def _release(self) -> None:
+        if self._bag_key is not None:
+            self.filter.set_mass(self.robot_mass)
+            self.extent, self._bag_key = [], None
+            self.log.info("bag released: robot envelope only")
+
+    def _on_bag(self, msg: Any) -> None:
+        try:
+            attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
+            figures, state = self._bag_figures(), self._state
+            if not attached or figures is None or state is None:
+                if not attached:
+                    self._release()
+                return
+            p_bag, q_bag = mc.pose(msg.pose)
+            if not (np.all(np.isfinite(p_bag)) and np.all(np.isfinite(q_bag))
+                    and float(q_bag @ q_bag) > 1e-12):
+                raise ValueError("non-finite bag pose")
+            offset = rot.rotate_inverse(state.orientation, p_bag - state.position)
+            r_rel = rot.to_matrix(state.orientation).T @ rot.to_matrix(rot.normalize(q_bag))
+            # a held bag sways by millimetres: rebuild the envelope only when it moved by 1 cm
+            key = (tuple(np.round(offset, 2)), tuple(np.round(r_rel, 2).ravel()), figures[0])
+            if key == self._bag_key:
+                return
+            mprops, com = carried_load(self.robot_mass, figures[0], figures[1], offset, r_rel)
+            self.filter.set_mass(mprops, com)
+            self.extent = box_corners(offset, figures[1], r_rel)
+            if self._bag_key is None:
+                self.log.info(f"bag attached: {figures[0]:.1f} kg at "
+                              f"{np.round(offset, 3).tolist()} m (body frame)")
+            self._bag_key = key
+        except (ValueError, AttributeError, TypeError) as exc:
+            self.log.warn(f"bad bag state dropped: {exc}")
+
+    def _on_ekf(self, msg: Any) -> None:
+        try:
+            state = State(mc.vec(msg.pose.position), mc.vec(msg.velocity),
+                          mc.quat(msg.pose.orientation), mc.vec(msg.omega))
+            vals = np.concatenate([state.position, state.velocity, state.orientation, state.omega])
+            if not np.all(np.isfinite(vals)) or np.linalg.norm(state.orientation) < 1e-6:
+                raise ValueError("non-finite state")
+            state.orientation = rot.normalize(state.orientation)
+            t = mc.stamp_s(msg.header.stamp)
+        except (AttributeError, TypeError, ValueError) as exc:
+            self.log.warn(f"bad EKF state dropped: {exc}")
+            return
+        self._state, self._state_t = state, t
+
+    # ---- the filter -------------------------------------------------------------------
+    def _on_command(self, msg: Any) -> None:
+        try:
+            f_nom, t_nom = mc.vec(msg.wrench.force), mc.vec(msg.wrench.torque)
+            t = mc.stamp_s(msg.header.stamp)
+            if not (np.all(np.isfinite(f_nom)) and np.all(np.isfinite(t_nom))):
+                raise ValueError("non-finite wrench")
+        except (AttributeError, TypeError, ValueError) as exc:
+            self.log.warn(f"bad nominal command dropped: {exc}")
+            return
+        state = self._state
+        if state is None:
+            self.pub_cmd.publish(msg)             # no state yet: nothing to filter against
+            return
+        if self._state_t is not None and t < self._state_t - STATE_MAX_AGE:
+            # the clock went back (a simulation reset): this state belongs to the old world
+            self._state = self._state_t = None
+            self.pub_cmd.publish(msg)
+            return
+        try:
+            res = self.filter.filter(f_nom, t_nom, state, extent=self.extent)
+        except (ValueError, ArithmeticError) as exc:
+            self.log.warn(f"nominal command dropped: {exc}")
+            return
+        out = self.FamCommand()
+        for name in ("header", "accel", "alpha", "status", "position_error",
+                     "position_error_integrated", "attitude_error", "attitude_error_integrated",
+                     "attitude_error_mag", "control_mode"):
+            setattr(out, name, getattr(msg, name))
+        mc.set_vec(out.wrench.force, res.force)
+        mc.set_vec(out.wrench.torque, res.torque)
+        self.pub_cmd.publish(out)
+        self.ticks += 1
+        self.active_ticks += bool(res.active)
+        self.fallback_ticks += bool(res.fallback)
+        self._publish_diagnostics(res, msg.header.stamp, t)
+
+    def _publish_diagnostics(self, res: Any, stamp: Any, t: float) -> None:
+        key = (bool(res.active), bool(res.fallback))
+        if key == self._diag_key and t - self._diag_t < self.diag_period:
+            return
+        if key != self._diag_key:
+            what = ("fallback: maximum braking" + (f" ({res.reason})" if res.reason else "")
+                    if res.fallback else "active" if res.active else "transparent")
+            self.log.info(f"safety filter {what} (min barrier {res.min_barrier:.3f} m)")
+        self._diag_key, self._diag_t = key, t
+        level = ERROR if res.fallback else WARN if res.active else OK
+        st = self.DiagnosticStatus()
+        st.level = level
+        st.name = "safety_filter"
+        st.hardware_id = self.node.get_namespace() if hasattr(self.node, "get_namespace") else ""
+        st.message = ("fallback: maximum braking wrench" if res.fallback
+                      else "active: command changed" if res.active else "transparent")
+        pairs = [("active", str(bool(res.active)).lower()),
+                 ("delta_norm", f"{res.delta_norm:.6g}"),
+                 ("slack", f"{res.slack:.6g}"),
+                 ("min_barrier", f"{res.min_barrier:.6g}"),
+                 ("fallback", str(bool(res.fallback)).lower()),
+                 ("reason", res.reason or ""),
+                 ("ticks", str(self.ticks)),
+                 ("active_ticks", str(self.active_ticks)),
+                 ("fallback_ticks", str(self.fallback_ticks))]
+        kvs = []
+        for k, v in pairs:
+            kv = self.KeyValue()
+            kv.key, kv.value = k, v
+            kvs.append(kv)
+        st.values = kvs
+        arr = self.DiagnosticArray()
+        arr.header.stamp = stamp
+        arr.status = [st]
+        self.pub_diag.publish(arr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return node_main.run(SafetyFilterNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
