@@ -22,7 +22,7 @@ from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
 
 
-CONTROLLERS = ("pd",)
+CONTROLLERS = ("pd", "mpc")
 DEMO_LEGS = ("node2_to_jem", "node2_to_jem_bag")
 
 
