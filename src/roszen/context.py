@@ -13,6 +13,9 @@ from .log import Logger
 from .zconfig import domain_id as env_domain_id, session_config
 
 
+_all_contexts: "weakref.WeakSet" = weakref.WeakSet()
+
+
 class Context:
     """One zenoh peer session shared by every node/entity created on it."""
 
@@ -27,6 +30,7 @@ class Context:
         self._id_lock = threading.Lock()
         self._nodes: "weakref.WeakSet" = weakref.WeakSet()
         self._closed = False
+        _all_contexts.add(self)
         self.logger = Logger("roszen")
         from .graph import GraphCache
         self.graph = GraphCache(self.session, self.domain_id, self.logger)
@@ -115,4 +119,26 @@ def shutdown(context: Optional[Context] = None) -> None:
         _default = None
 
 
-atexit.register(lambda: shutdown() if _default is not None else None)
+def _shutdown_all() -> None:
+    """Close every context still open when the program ends (nodes destroyed, sessions closed)."""
+    if _default is not None:
+        try:
+            shutdown()
+        except Exception:
+            pass
+    for ctx in list(_all_contexts):
+        try:
+            ctx.shutdown()
+        except Exception:
+            pass
+
+
+# The interpreter joins non-daemon threads *before* running atexit hooks, and zenoh-python's
+# callback threads are non-daemon: a program whose main thread ends without destroying its
+# node would wait on them forever. threading's own exit hooks run before that join (the same
+# hook concurrent.futures uses), so the session is closed there and its threads end.
+try:
+    threading._register_atexit(_shutdown_all)  # type: ignore[attr-defined]
+except (AttributeError, RuntimeError):
+    pass
+atexit.register(_shutdown_all)

@@ -14,6 +14,17 @@ import time
 from typing import Optional
 
 
+_pending_interrupts: list = []
+
+
+def raise_pending() -> None:
+    """Raise a KeyboardInterrupt/SystemExit that a zenoh callback caught (see node._reraise_on_main)."""
+    if _pending_interrupts:
+        exc = _pending_interrupts[0]
+        _pending_interrupts.clear()
+        raise exc
+
+
 class Executor:
     """Runs the callbacks of its nodes one at a time on the spinning thread."""
 
@@ -129,6 +140,7 @@ class Executor:
     def spin_once(self, timeout_sec: Optional[float] = None) -> bool:
         """Run at most one callback; wait up to timeout_sec (None = forever) for work."""
         with self._spin_lock:
+            raise_pending()
             if self._run_due_timer():
                 return True
             ent = self._next_entity(timeout_sec)
@@ -137,20 +149,28 @@ class Executor:
             return self._run_entity(ent, 1)
 
     def _run_entity(self, ent, batch: int) -> bool:
-        """Run up to `batch` pending items of one entity, then requeue it if work is left."""
-        ran = ent._run(batch)
-        if ent._has_work():
-            self._ready.append(ent)  # more pending: go to the back of the line (fairness)
-        else:
-            ent._scheduled = False
-            if ent._has_work():  # raced with a producer that saw the flag still set: take it back
-                ent._scheduled = True
-                self._ready.append(ent)
+        """Run up to `batch` pending items of one entity, then requeue it if work is left.
+
+        A KeyboardInterrupt/SystemExit raised by a callback propagates out of spin (callbacks
+        catch only Exception); the entity is requeued first so a later spin still serves it.
+        """
+        ran = False
+        try:
+            ran = ent._run(batch)
+        finally:
+            if ent._has_work():
+                self._ready.append(ent)  # more pending: go to the back of the line (fairness)
+            else:
+                ent._scheduled = False
+                if ent._has_work():  # raced with a producer that saw the flag still set: take it back
+                    ent._scheduled = True
+                    self._ready.append(ent)
         return ran
 
     def _spin_some(self, timeout_sec: float, batch: int = 64) -> None:
         """spin()'s step: like spin_once but drains up to `batch` items of one entity."""
         with self._spin_lock:
+            raise_pending()
             if self._run_due_timer():
                 return
             ent = self._next_entity(timeout_sec)

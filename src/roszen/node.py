@@ -17,7 +17,7 @@ from . import codec, wire
 from .args import RosArgsError, load_params_file, parse_args
 from .clock import Clock, Duration, Time
 from .context import Context, get_default_context
-from .executor import Executor
+from .executor import Executor, _pending_interrupts, raise_pending
 from .log import Logger, severity_from_name
 from .names import apply_remap, expand_name, normalize_namespace, validate_node_name
 from .parameters import (InvalidParameterTypeException, InvalidParameterValueException, Parameter,
@@ -56,37 +56,101 @@ class _Entity:
         return True
 
 
+def _max_bytes_default() -> int:
+    """Incoming size limit per endpoint: ROSZEN_MAX_MESSAGE_BYTES, default 16 MiB."""
+    import os
+    try:
+        v = int(os.environ.get("ROSZEN_MAX_MESSAGE_BYTES", ""))
+        return v if v > 0 else DEFAULT_MAX_BYTES
+    except ValueError:
+        return DEFAULT_MAX_BYTES
+
+
+DEFAULT_MAX_BYTES = 16 * 1024 * 1024
+
+
+def _reraise_on_main(exc: BaseException) -> None:
+    """Keep a KeyboardInterrupt/SystemExit caught in a zenoh callback for the spinning thread.
+
+    zenoh-python runs some callbacks on the calling thread (a put/get delivered to a subscriber
+    or queryable of the same session runs it inside that call) and swallows what they raise
+    ("callback error"): Ctrl-C landing there would be lost. It is raised again once zenoh has
+    returned: after the put/get, or by the executor's next step.
+    """
+    _pending_interrupts.append(exc)
+
+
+def _guarded(fn: Callable) -> Callable:
+    """`fn` for a zenoh callback that may run on the main thread: Ctrl-C is re-delivered, not lost."""
+    def run(*a):
+        try:
+            fn(*a)
+        except (KeyboardInterrupt, SystemExit) as e:
+            _reraise_on_main(e)
+    return run
+
+
+class _Endpoint:
+    """What publishers, subscriptions, services and clients share: the endpoint's key
+    expression, liveliness token and GID (all derived from node, name, type and QoS), the
+    token's declaration with graph registration, and undeclaring both on destroy."""
+
+    _zobj: Any = None
+    _token: Any = None
+
+    def _init_endpoint(self, node: "Node", kind: str, name: str, sup: Any, qos: QoSProfile) -> None:
+        self.node = node
+        self._sup = sup
+        ctx = node.context
+        self._eid = ctx.next_id()
+        self.key_expr = wire.topic_keyexpr(ctx.domain_id, name, sup.dds_name, sup.type_hash)
+        self.token = wire.endpoint_token(ctx.domain_id, ctx.zid, node._nid, self._eid, kind, node._enclave,
+                                         node.namespace, node.name, name, sup.dds_name, sup.type_hash, qos)
+        self.gid = wire.gid_of(self.token)
+
+    def _advertise(self, zobj: Any) -> None:
+        """Keep the zenoh entity, declare the liveliness token and register it in the graph."""
+        self._zobj = zobj
+        ctx = self.node.context
+        self._token = ctx.session.liveliness().declare_token(self.token)
+        ctx.graph.add(self.token)
+
+    def destroy(self) -> None:
+        """Undeclare the token and the zenoh entity; the graph forgets the endpoint at once."""
+        for obj in (self._token, self._zobj):
+            if obj is None:
+                continue
+            try:
+                obj.undeclare()
+            except Exception:
+                pass
+        self.node.context.graph.remove(self.token)
+
+
 # ---------------------------------------------------------------------------------------------
-class Publisher:
+class Publisher(_Endpoint):
     """Publishes CDR samples with the 33-byte rmw_zenoh attachment."""
 
     def __init__(self, node: "Node", msg_type: str, topic: str, qos: QoSProfile) -> None:
-        self.node = node
-        self._sup = codec.msg_support(msg_type)
-        self.msg_type = self._sup.name
+        sup = codec.msg_support(msg_type)
+        self.msg_type = sup.name
         self.topic_name = node.resolve_topic_name(topic)
         self.qos_profile = qos
+        self._init_endpoint(node, wire.PUB, self.topic_name, sup, qos)
         ctx = node.context
-        self._eid = ctx.next_id()
-        self.key_expr = wire.topic_keyexpr(ctx.domain_id, self.topic_name, self._sup.dds_name, self._sup.type_hash)
-        self.token = wire.endpoint_token(ctx.domain_id, ctx.zid, node._nid, self._eid, wire.PUB, node._enclave,
-                                         node.namespace, node.name, self.topic_name, self._sup.dds_name,
-                                         self._sup.type_hash, qos)
-        self.gid = wire.gid_of(self.token)
         self._seq = itertools.count(1)
         cc = _BLOCK if (qos.reliable and qos.keep_all) else _DROP
         rel = zenoh.Reliability.RELIABLE if qos.reliable else zenoh.Reliability.BEST_EFFORT
         if qos.transient_local:
             miss = zext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=0.5) if qos.reliable else None
-            self._pub = zext.declare_advanced_publisher(
+            zpub = zext.declare_advanced_publisher(
                 ctx.session, self.key_expr, congestion_control=cc, reliability=rel,
                 cache=zext.CacheConfig(qos.effective_depth), sample_miss_detection=miss,
                 publisher_detection=True)
         else:
-            self._pub = ctx.session.declare_publisher(self.key_expr, congestion_control=cc, reliability=rel)
-        self._token = ctx.session.liveliness().declare_token(self.token)
-        node.context.graph.add(self.token)
-        self._cls, self._serialize, self._put = self._sup.cls, self._sup.serialize, self._pub.put
+            zpub = ctx.session.declare_publisher(self.key_expr, congestion_control=cc, reliability=rel)
+        self._advertise(zpub)
+        self._cls, self._serialize, self._put = sup.cls, sup.serialize, zpub.put
         self._attachment = wire.attachment_maker(self.gid)
 
     def publish(self, msg: Any) -> None:
@@ -100,80 +164,85 @@ class Publisher:
         else:
             raise TypeError(f"publisher on {self.topic_name} expects {self.msg_type}, got {type(msg).__name__}")
         self._put(data, attachment=self._attachment(next(self._seq)))
+        if _pending_interrupts:  # Ctrl-C during a same-session subscriber's callback inside put
+            raise_pending()
 
     def get_subscription_count(self) -> int:
         return self.node.context.graph.count_subscribers(self.topic_name)
 
-    def destroy(self) -> None:
-        for obj in (self._token, self._pub):
-            try:
-                obj.undeclare()
-            except Exception:
-                pass
-        self.node.context.graph.remove(self.token)
-
 
 # ---------------------------------------------------------------------------------------------
-class Subscription(_Entity):
+class Subscription(_Entity, _Endpoint):
     """Receives samples into a per-subscription buffer bounded like a DDS history."""
 
     def __init__(self, node: "Node", msg_type: str, topic: str, callback: Callable, qos: QoSProfile,
-                 raw: bool = False, direct: bool = False) -> None:
-        self.node = node
-        self._sup = codec.msg_support(msg_type)
-        self.msg_type = self._sup.name
+                 raw: bool = False, direct: bool = False, max_bytes: Optional[int] = None) -> None:
+        sup = codec.msg_support(msg_type)
+        self.msg_type = sup.name
         self.topic_name = node.resolve_topic_name(topic)
         self.qos_profile = qos
         self.callback = callback
         self.raw = raw
         self._direct = direct
-        self._deserialize = self._sup.deserialize
+        self._deserialize = sup.deserialize
         self._buf: collections.deque = collections.deque(maxlen=None if qos.keep_all else qos.effective_depth)
-        self._warned_no_att = False
-        self._bad_sources: set = set()
+        self.max_bytes = max_bytes if max_bytes is not None else _max_bytes_default()
+        self._warned: set = set()
+        self.dropped = 0
+        self._init_endpoint(node, wire.SUB, self.topic_name, sup, qos)
         ctx = node.context
-        self._eid = ctx.next_id()
-        self.key_expr = wire.topic_keyexpr(ctx.domain_id, self.topic_name, self._sup.dds_name, self._sup.type_hash)
-        self.token = wire.endpoint_token(ctx.domain_id, ctx.zid, node._nid, self._eid, wire.SUB, node._enclave,
-                                         node.namespace, node.name, self.topic_name, self._sup.dds_name,
-                                         self._sup.type_hash, qos)
-        self.gid = wire.gid_of(self.token)
         # indirect: zenoh's network thread only hands the sample to a zenoh-python thread, so it
         # never waits for the GIL while the executor decodes (x2 msgs/s measured, same latency)
         on_sample = (_callback(self._on_sample_direct) if direct
                      else zenoh.handlers.Callback(self._on_sample, indirect=True))
         if qos.transient_local:
-            self._sub = zext.declare_advanced_subscriber(
+            zsub = zext.declare_advanced_subscriber(
                 ctx.session, self.key_expr, on_sample,
                 history=zext.HistoryConfig(detect_late_publishers=True, max_samples=qos.effective_depth),
                 recovery=zext.RecoveryConfig(periodic_queries=None, heartbeat=True) if qos.reliable else None,
                 subscriber_detection=True)
         else:
-            self._sub = ctx.session.declare_subscriber(self.key_expr, on_sample)
-        self._token = ctx.session.liveliness().declare_token(self.token)
-        ctx.graph.add(self.token)
+            zsub = ctx.session.declare_subscriber(self.key_expr, on_sample)
+        self._advertise(zsub)
 
     def _on_sample(self, sample: "zenoh.Sample") -> None:  # zenoh thread: the minimum
+        if len(sample.payload) > self.max_bytes:  # never buffered: a flood of huge samples costs no memory
+            self._drop_once("oversize", f"larger than this subscription's limit of {self.max_bytes} bytes "
+                                        f"({len(sample.payload)} bytes)")
+            return
         self._buf.append(sample)
         if not self._scheduled:
             self.node._executor.schedule(self)
 
     def _on_sample_direct(self, sample: "zenoh.Sample") -> None:  # zenoh thread (/clock only)
-        self._execute(sample)
-        self.node._executor.wake()
+        try:
+            if len(sample.payload) > self.max_bytes:
+                self._drop_once("oversize", f"larger than this subscription's limit of {self.max_bytes} "
+                                            f"bytes ({len(sample.payload)} bytes)")
+                return
+            self._execute(sample)
+            self.node._executor.wake()
+        except (KeyboardInterrupt, SystemExit) as e:  # may run on the main thread inside a put
+            _reraise_on_main(e)
 
-    def _no_attachment(self) -> None:
-        if not self._warned_no_att:
-            self._warned_no_att = True
+    def _drop_once(self, why: str, what: str) -> None:
+        """Count a dropped sample; log the first of each kind per subscription (a flood logs once)."""
+        self.dropped += 1
+        if why not in self._warned:
+            self._warned.add(why)
             self.node.get_logger().warn(
-                f"dropping sample on {self.topic_name} without the rmw_zenoh attachment "
-                f"(as rmw_zenoh does); further ones are dropped silently")
+                f"dropping samples on {self.topic_name} {what}; further ones are dropped silently")
 
     def _execute(self, sample: "zenoh.Sample") -> None:
         """Decode one sample and run the callback (executor thread; zenoh thread for /clock)."""
         att = sample.attachment
         if att is None:
-            self._no_attachment()
+            self._drop_once("no_att", "without the rmw_zenoh attachment (as rmw_zenoh does)")
+            return
+        ab = att.to_bytes()
+        if len(ab) != wire.ATTACHMENT_SIZE or ab[16] != 16:
+            self._drop_once("bad_att", f"with a malformed rmw_zenoh attachment ({len(ab)} bytes, expected "
+                                       f"{wire.ATTACHMENT_SIZE}: seq, timestamp, 0x10, 16-byte GID)")
             return
         data = sample.payload.to_bytes()
         if self.raw:
@@ -182,7 +251,7 @@ class Subscription(_Entity):
             try:
                 msg = self._deserialize(data)
             except Exception as e:
-                self._report_bad(att, f"malformed CDR payload ({len(data)} bytes) for {self.msg_type}: {e}")
+                self._report_bad(ab, f"malformed CDR payload ({len(data)} bytes) for {self.msg_type}: {e}")
                 return
         try:
             self.callback(msg)
@@ -190,55 +259,56 @@ class Subscription(_Entity):
             self.node.get_logger().error(
                 f"subscription callback for {self.topic_name} raised:\n{traceback.format_exc().rstrip()}")
 
-    def _report_bad(self, att, what: str) -> None:
-        try:
-            src = wire.parse_attachment(att.to_bytes()).gid.hex()
-        except ValueError:
-            src = "unknown publisher"
+    def _report_bad(self, att: bytes, what: str) -> None:
+        self.dropped += 1
+        src = att[17:].hex()
         self.node.get_logger().error(f"dropped a sample on {self.topic_name} from {src}: {what}")
 
     def get_publisher_count(self) -> int:
         return self.node.context.graph.count_publishers(self.topic_name)
 
-    def destroy(self) -> None:
-        for obj in (self._token, self._sub):
-            try:
-                obj.undeclare()
-            except Exception:
-                pass
-        self.node.context.graph.remove(self.token)
-
 
 # ---------------------------------------------------------------------------------------------
-class Service(_Entity):
+class Service(_Entity, _Endpoint):
     """A queryable (complete=true); the handler runs on the executor thread."""
 
-    def __init__(self, node: "Node", srv_type: str, name: str, handler: Callable, qos: QoSProfile) -> None:
-        self.node = node
-        self._sup = codec.srv_support(srv_type)
-        self.srv_type = self._sup.name
+    def __init__(self, node: "Node", srv_type: str, name: str, handler: Callable, qos: QoSProfile,
+                 max_bytes: Optional[int] = None) -> None:
+        sup = codec.srv_support(srv_type)
+        self.srv_type = sup.name
         self.service_name = node.resolve_service_name(name)
         self.handler = handler
         self._two_args = _arity(handler) >= 2
         self._buf: collections.deque = collections.deque()
-        ctx = node.context
-        self._eid = ctx.next_id()
-        self.key_expr = wire.topic_keyexpr(ctx.domain_id, self.service_name, self._sup.dds_name, self._sup.type_hash)
-        self.token = wire.endpoint_token(ctx.domain_id, ctx.zid, node._nid, self._eid, wire.SERVICE,
-                                         node._enclave, node.namespace, node.name, self.service_name,
-                                         self._sup.dds_name, self._sup.type_hash, qos)
-        self.gid = wire.gid_of(self.token)
-        self._q = ctx.session.declare_queryable(self.key_expr, _callback(self._on_query), complete=True)
-        self._token = ctx.session.liveliness().declare_token(self.token)
-        ctx.graph.add(self.token)
+        self.max_bytes = max_bytes if max_bytes is not None else _max_bytes_default()
+        self._warned: set = set()
+        self._init_endpoint(node, wire.SERVICE, self.service_name, sup, qos)
+        self._advertise(node.context.session.declare_queryable(self.key_expr, _callback(self._on_query),
+                                                              complete=True))
 
-    def _on_query(self, query: "zenoh.Query") -> None:  # zenoh thread
-        self._buf.append(query)
-        if not self._scheduled:
-            self.node._executor.schedule(self)
+    def _on_query(self, query: "zenoh.Query") -> None:  # zenoh thread (the caller's, for a local client)
+        try:
+            payload = query.payload
+            if payload is not None and len(payload) > self.max_bytes:
+                self._fail(query, f"request of {len(payload)} bytes is larger than this service's limit "
+                                  f"of {self.max_bytes} bytes", key="oversize")
+                query.drop()
+                return
+            self._buf.append(query)
+            if not self._scheduled:
+                self.node._executor.schedule(self)
+        except (KeyboardInterrupt, SystemExit) as e:
+            _reraise_on_main(e)
 
-    def _fail(self, query, reason: str) -> None:
-        self.node.get_logger().error(f"service {self.service_name}: {reason}")
+    def _fail(self, query, reason: str, key: Optional[str] = None) -> None:
+        """Answer with a zenoh error reply; log it (once per `key` when one is given: floods)."""
+        if key is None or key not in self._warned:
+            if key is not None:
+                self._warned.add(key)
+                reason_log = reason + "; further ones are answered with an error silently"
+            else:
+                reason_log = reason
+            self.node.get_logger().error(f"service {self.service_name}: {reason_log}")
         try:
             query.reply_err(f"{self.service_name}: {reason}")
         except Exception:
@@ -287,14 +357,6 @@ class Service(_Entity):
             except Exception:
                 pass
 
-    def destroy(self) -> None:
-        for obj in (self._token, self._q):
-            try:
-                obj.undeclare()
-            except Exception:
-                pass
-        self.node.context.graph.remove(self.token)
-
 
 def _arity(fn: Callable) -> int:
     try:
@@ -306,28 +368,20 @@ def _arity(fn: Callable) -> int:
 
 
 # ---------------------------------------------------------------------------------------------
-class Client:
+class Client(_Endpoint):
     """Service client: zenoh get (ALL_COMPLETE, no consolidation) with the request attachment."""
 
     def __init__(self, node: "Node", srv_type: str, name: str, qos: QoSProfile,
                  query_timeout: float = 600.0) -> None:
-        self.node = node
-        self._sup = codec.srv_support(srv_type)
-        self.srv_type = self._sup.name
+        sup = codec.srv_support(srv_type)
+        self.srv_type = sup.name
         self.srv_name = node.resolve_service_name(name)
-        ctx = node.context
-        self._eid = ctx.next_id()
-        self.key_expr = wire.topic_keyexpr(ctx.domain_id, self.srv_name, self._sup.dds_name, self._sup.type_hash)
-        self.token = wire.endpoint_token(ctx.domain_id, ctx.zid, node._nid, self._eid, wire.CLIENT,
-                                         node._enclave, node.namespace, node.name, self.srv_name,
-                                         self._sup.dds_name, self._sup.type_hash, qos)
-        self.gid = wire.gid_of(self.token)
+        self._init_endpoint(node, wire.CLIENT, self.srv_name, sup, qos)
         self._seq = itertools.count(1)
-        self._querier = ctx.session.declare_querier(
+        self._querier = node.context.session.declare_querier(
             self.key_expr, target=zenoh.QueryTarget.ALL_COMPLETE,
             consolidation=zenoh.ConsolidationMode.NONE, timeout=query_timeout)
-        self._token = ctx.session.liveliness().declare_token(self.token)
-        ctx.graph.add(self.token)
+        self._advertise(self._querier)
 
     def service_is_ready(self) -> bool:
         return self.node.context.graph.service_is_available(self.srv_name, self._sup.dds_name, self._sup.type_hash)
@@ -382,8 +436,11 @@ class Client:
                 except concurrent.futures.InvalidStateError:
                     pass
 
-        self._querier.get(zenoh.handlers.Callback(on_reply, on_done, indirect=False), payload=data,
+        self._querier.get(zenoh.handlers.Callback(_guarded(on_reply), _guarded(on_done), indirect=False),
+                          payload=data,
                           attachment=wire.make_attachment(seq, self.gid))
+        if _pending_interrupts:
+            raise_pending()
         return fut
 
     def call(self, request: Any, timeout_sec: Optional[float] = None) -> Any:
@@ -394,14 +451,6 @@ class Client:
         except concurrent.futures.TimeoutError:
             fut.cancel()
             raise TimeoutError(f"service {self.srv_name} did not answer within {timeout_sec} s") from None
-
-    def destroy(self) -> None:
-        for obj in (self._token, self._querier):
-            try:
-                obj.undeclare()
-            except Exception:
-                pass
-        self.node.context.graph.remove(self.token)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -574,16 +623,22 @@ class Node:
         return pub
 
     def create_subscription(self, msg_type: Any, topic: str, callback: Callable,
-                            qos_profile: "QoSProfile | int" = 10, *, raw: bool = False, **_ignored) -> Subscription:
+                            qos_profile: "QoSProfile | int" = 10, *, raw: bool = False,
+                            max_bytes: Optional[int] = None, **_ignored) -> Subscription:
+        """Subscribe; samples above `max_bytes` (default ROSZEN_MAX_MESSAGE_BYTES or 16 MiB) are dropped."""
         self._check_alive()
-        sub = Subscription(self, _type_name(msg_type), topic, callback, as_qos(qos_profile), raw=raw)
+        sub = Subscription(self, _type_name(msg_type), topic, callback, as_qos(qos_profile), raw=raw,
+                           max_bytes=max_bytes)
         self._subs.append(sub)
         return sub
 
     def create_service(self, srv_type: Any, srv_name: str, callback: Callable,
-                       qos_profile: "QoSProfile | int" = SERVICES_DEFAULT, **_ignored) -> Service:
+                       qos_profile: "QoSProfile | int" = SERVICES_DEFAULT, *, max_bytes: Optional[int] = None,
+                       **_ignored) -> Service:
+        """Serve; requests above `max_bytes` (default as subscriptions) get an error reply."""
         self._check_alive()
-        srv = Service(self, _type_name(srv_type, "srv"), srv_name, callback, as_qos(qos_profile))
+        srv = Service(self, _type_name(srv_type, "srv"), srv_name, callback, as_qos(qos_profile),
+                      max_bytes=max_bytes)
         self._srvs.append(srv)
         return srv
 

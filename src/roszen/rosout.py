@@ -1,7 +1,6 @@
 """Mirror a node's log records to /rosout (rcl_interfaces/msg/Log), as rclpy does."""
 from __future__ import annotations
 
-import inspect
 import time
 from typing import Optional
 
@@ -10,14 +9,19 @@ from .qos import ROSOUT
 
 
 def attach_rosout(node) -> Optional[object]:
-    """Create the /rosout publisher and hook it to the node's logger (None if the type is unknown)."""
+    """Create the /rosout publisher and hook it to the node's logger (None if the type is unknown).
+
+    The record's file/function/line come from the call site the logger already resolved: no
+    frame object is taken here (a frame kept in a local forms a cycle with it and would pin the
+    caller's locals, e.g. a bad sample's payload, until a full garbage collection).
+    """
     try:
         pub = node.create_publisher("rcl_interfaces/msg/Log", "/rosout", ROSOUT)
     except (codec.TypeSupportError, ImportError, KeyError):
         return None
     cls = pub._sup.cls
 
-    def sink(level, name, msg) -> None:
+    def sink(level, name, msg, site=None) -> None:
         if not node._alive:
             return
         m = cls()
@@ -26,11 +30,8 @@ def attach_rosout(node) -> Optional[object]:
         m.level = int(level)
         m.name = name
         m.msg = msg
-        fr = inspect.currentframe()
-        caller = fr.f_back.f_back.f_back if fr and fr.f_back and fr.f_back.f_back else None
-        if caller is not None and caller.f_back is not None:
-            caller = caller.f_back
-            m.file, m.function, m.line = caller.f_code.co_filename, caller.f_code.co_name, caller.f_lineno
+        if site is not None:
+            m.file, m.line, m.function = site[0], site[1], site[2]
         pub.publish(m)
 
     node.get_logger().sink = sink
