@@ -257,14 +257,17 @@ def _unit(v: np.ndarray) -> np.ndarray | None:
 
 
 def chase_camera(world: World, position: np.ndarray, heading: np.ndarray | None,
-                 distance: float = 1.6, height: float = 0.55, fov: float = 65.0) -> Camera:
-    """A camera behind the robot (against `heading`, its direction of travel) and above it,
+                 distance: float = 1.6, height: float = 0.6, side: float = 0.6,
+                 fov: float = 65.0) -> Camera:
+    """A camera behind the robot (against `heading`, its direction of travel), above it and
+    to one side (a carried cargo bag trails the robot and would hide it from straight behind),
     pulled in towards the robot when that spot would be inside or behind a wall."""
     pos = np.asarray(position, float)
     h = _unit(np.asarray(heading, float)) if heading is not None else None
     if h is None or abs(float(h @ UP)) > 0.95:
         h = np.array([1.0, 0.0, 0.0]) if h is None else _unit(np.cross(UP, [1.0, 0, 0]))
-    back = -h * distance + UP * height
+    lateral = _unit(np.cross(UP, h))
+    back = -h * distance + UP * height + (lateral * side if lateral is not None else 0.0)
     keep = world.keep_in
     for s in np.linspace(1.0, 0.2, 9):                    # the farthest spot still inside
         pts = pos + np.outer(np.linspace(0.1, 1.0, 8), back * s)
