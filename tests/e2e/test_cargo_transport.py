@@ -256,3 +256,21 @@ def test_bad_override_starts_nothing(tmp_path, config_dir):
     assert len(lines) == 1 and "nonsense" in lines[0], out.stderr
     assert "started" not in out.stdout
     assert not run.exists()
+
+
+def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
+    """mpc_controller_node (the sampling MPC on controller_node) flies a short leg carrying the
+    constraint bag through the whole graph, and publishes what it considered."""
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=short_hop", "controller:=mpc",
+                    "bag_model:=constraint")
+    launches.append(launch)
+    code = launch.wait(timeout=300.0)
+    assert code == 0, "\n".join(launch.lines[-40:])
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["success"], summary["reason"]
+    assert summary["contacts"] == 0 and summary["carrying_bag"]
+    msgs = mcap_messages(run / "bag")
+    cands = msgs.get("/gnc/ctl/candidates", [])
+    assert cands, "no candidates published"
+    assert any(m.ns == "chosen" for arr in cands for m in arr.markers)
