@@ -55,6 +55,16 @@ def global_routes(wps, pairs, mode, safe, reps) -> None:
               f"{lb:>8.1f}{gap:>6}{tr.info.get('solves', 0):>7}{vpk:>8.3f}")
 
 
+def long_sampling(wps, mode, safe, reps) -> None:
+    """The global trajectory's samples at 350 Hz, face-forward (one attitude piece a segment)."""
+    a, b = "jem", "cupola"
+    plan = planner.plan_global(wps[a], rot.IDENTITY, wps[b], rot.IDENTITY, mode, face_forward=True, safe=safe)
+    t, st = _median_time(lambda: plan.trajectory.sample_rate(RATE), reps)
+    print(f"\nsampling {a} -> {b} face-forward ({plan.trajectory.duration:.0f} s, "
+          f"{len(plan.trajectory.position)} + {len(plan.trajectory.attitude)} pieces) at {RATE:.0f} Hz: "
+          f"{len(st)} states in {t * 1e3:.1f} ms ({t / len(st) * 1e9:.0f} ns a state); target: a few ms")
+
+
 def formations(wps, mode, safe, reps) -> None:
     q = rot.IDENTITY
     print(f"\ntwo robots + bag (0.8 m apart in line, default bag; median of {reps}); target plan <= 0.5 s;"
@@ -111,6 +121,7 @@ def main(argv=None) -> int:
     if args.all:
         pairs += [p for p in itertools.combinations(sorted(wps), 2) if p not in PAPER and p[::-1] not in PAPER]
     global_routes(wps, pairs, args.mode, safe, args.reps)
+    long_sampling(wps, args.mode, safe, args.reps)
     formations(wps, args.mode, safe, args.reps)
     local()
     return 0

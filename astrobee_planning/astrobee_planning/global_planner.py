@@ -13,7 +13,11 @@ Timing: T starts from a trapezoidal speed profile along the reference polyline (
 speeds from the turning angles), and a handful of retiming steps stretch or shrink each
 segment by its own limit usage; the best uniformly-scaled result is kept. Each step is one
 solve of the same QP, updated in place (Clarabel `update` of P, A and b on a fixed sparsity
-pattern, never re-canonicalised): 4-6 solves per route instead of a duration bisection.
+pattern, never re-canonicalised): 4-8 solves per route instead of a duration bisection
+(73-127). Segments follow the profile: short where the speed changes (so the piecewise curve
+can hold the acceleration at its limit), up to MAX_LEG in cruise; the joints on straight legs
+are pulled towards the profile's points (a quadratic tracking term), those near a corner are
+left free so the curve cuts it.
 The time-optimality gap is reported against the trapezoidal lower bound on the shortest
 polyline through the route's boxes.
 """
