@@ -8,14 +8,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from roszen.cli.common import CliError, line_buffered
+from roszen.cli.common import CliError, Parser, line_buffered
 
 VERBS = ("topic", "service", "node", "param", "interface", "bag", "run", "router")
 
 
 def build_parser(prog: str) -> argparse.ArgumentParser:
     from roszen.cli import bagcmd, graphcmd, interface, param, service, topic
-    p = argparse.ArgumentParser(prog=prog, description="ros2-style tools over rmw_zenoh")
+    p = Parser(prog=prog, description="ros2-style tools over rmw_zenoh")
     sub = p.add_subparsers(dest="verb", metavar="verb")
     sub.required = True
     topic.add_parser(sub)
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None, prog: str = "roszen", registry=None) -> 
         return _run(argv[1:], prog, registry)
     try:
         if argv and argv[0] == "router":    # no verb modules needed: starts fast
-            parser = argparse.ArgumentParser(
+            parser = Parser(
                 prog=f"{prog} router", description="run the Zenoh router (rmw_zenohd equivalent)")
             _router_args(parser)
             args = parser.parse_args(argv[1:])

@@ -1,6 +1,8 @@
 """Shared pieces of the command verbs: the one-line error type and line-buffered output."""
 from __future__ import annotations
 
+import argparse
+import re
 import sys
 
 
@@ -26,6 +28,71 @@ def positive_float(text: str) -> float:
     if not value > 0.0 or value == float("inf"):
         raise CliError(f"must be a positive number, got {text!r}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer > 0 (windows, counts)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise CliError(f"not an integer: {text!r}") from None
+    if value <= 0:
+        raise CliError(f"must be a positive integer, got {text!r}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise CliError(f"not an integer: {text!r}") from None
+    if value < 0:
+        raise CliError(f"must be >= 0, got {text!r}")
+    return value
+
+
+_NEGATIVE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser for the verbs: a bad argument is one line naming it (CliError, exit 1),
+    never a usage dump; an option's value may be a negative number even where the parser also
+    has options like `-1` (argparse would take `-r -5` for two options; the type then refuses
+    the value and says which argument it was)."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        if args is not None:
+            args = self._join_negative_values(list(args))
+        return super().parse_known_args(args, namespace)
+
+    def _join_negative_values(self, args: list) -> list:
+        out: list = []
+        i = 0
+        while i < len(args):
+            tok = args[i]
+            action = self._option_string_actions.get(tok)
+            if (action is not None and action.nargs is None and action.option_strings
+                    and i + 1 < len(args) and _NEGATIVE.match(args[i + 1])):
+                out.append(f"{tok}={args[i + 1]}" if tok.startswith("--") else tok + args[i + 1])
+                i += 2
+                continue
+            if tok == "--":
+                out.extend(args[i:])
+                break
+            out.append(tok)
+            i += 1
+        return out
+
+    def _get_value(self, action, arg_string):
+        try:
+            return super()._get_value(action, arg_string)
+        except CliError as exc:
+            name = "/".join(action.option_strings) or action.dest
+            raise CliError(f"argument {name}: {exc}") from None
+
+    def error(self, message: str):
+        raise CliError(message.replace("\n", " "))
 
 
 def add_qos_args(p, default_reliability: str | None = None) -> None:

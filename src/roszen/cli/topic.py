@@ -6,8 +6,9 @@ import sys
 import threading
 import time
 
-from roszen.cli.common import (CliError, add_qos_args, fq_name, make_node, parse_yaml_values,
-                               positive_float, qos_from_args, spin_until)
+from roszen.cli.common import (CliError, add_qos_args, fq_name, make_node, non_negative_int,
+                               parse_yaml_values, positive_float, positive_int, qos_from_args,
+                               spin_until)
 
 
 def add_parser(sub) -> None:
@@ -52,13 +53,13 @@ def add_parser(sub) -> None:
 
     hz = v.add_parser("hz", help="print the average publishing rate")
     hz.add_argument("topic_name")
-    hz.add_argument("-w", "--window", type=int, default=10000)
+    hz.add_argument("-w", "--window", type=positive_int, default=10000)
     hz.add_argument("--discovery-timeout", type=positive_float, default=3.0)
     hz.set_defaults(func=hz_cmd)
 
     bw = v.add_parser("bw", help="print the bandwidth used by a topic")
     bw.add_argument("topic_name")
-    bw.add_argument("-w", "--window", type=int, default=100)
+    bw.add_argument("-w", "--window", type=positive_int, default=100)
     bw.add_argument("--discovery-timeout", type=positive_float, default=3.0)
     bw.set_defaults(func=bw_cmd)
 
@@ -67,11 +68,11 @@ def add_parser(sub) -> None:
     pub.add_argument("message_type")
     pub.add_argument("values", nargs="?", default="{}", help="YAML of the message fields")
     pub.add_argument("-r", "--rate", type=positive_float, default=1.0, help="Hz (default 1)")
-    pub.add_argument("-p", "--print", type=int, default=1, dest="print_nth",
+    pub.add_argument("-p", "--print", type=non_negative_int, default=1, dest="print_nth",
                      help="print every N-th message (0: none)")
     pub.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
-    pub.add_argument("-t", "--times", type=int, default=0, help="publish N messages and exit")
-    pub.add_argument("-w", "--wait-matching-subscriptions", type=int, default=None)
+    pub.add_argument("-t", "--times", type=non_negative_int, default=0, help="publish N messages and exit")
+    pub.add_argument("-w", "--wait-matching-subscriptions", type=non_negative_int, default=None)
     pub.add_argument("--keep-alive", type=float, default=0.1,
                      help="seconds to stay after the last message (default 0.1)")
     pub.add_argument("-n", "--node-name", help="name of the publishing node")

@@ -1,0 +1,43 @@
+"""Bad numeric arguments of the roszen verbs: exit 1 with one line naming the argument (issue 19.11).
+
+Parsing fails before any node is created, so no router is needed.
+"""
+from __future__ import annotations
+
+import pytest
+
+from roszen.cli import main
+
+T = "std_msgs/msg/String"
+
+
+@pytest.mark.parametrize("argv, name, value", [
+    (["topic", "hz", "/x", "-w", "0"], "-w/--window", "'0'"),
+    (["topic", "hz", "/x", "--window", "-3"], "-w/--window", "'-3'"),
+    (["topic", "bw", "/x", "-w", "-1"], "-w/--window", "'-1'"),
+    (["topic", "pub", "/x", T, "-r", "-5"], "-r/--rate", "'-5'"),
+    (["topic", "pub", "/x", T, "--rate", "-0.5"], "-r/--rate", "'-0.5'"),
+    (["topic", "pub", "/x", T, "-r", "0"], "-r/--rate", "'0'"),
+    (["topic", "pub", "/x", T, "-t", "-2"], "-t/--times", "'-2'"),
+    (["topic", "echo", "/x", "--timeout", "-2"], "--timeout", "'-2'"),
+])
+def test_bad_number_is_one_line_exit_1(argv, name, value, capsys):
+    assert main(argv, prog="roszen") == 1
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1, cap.err
+    assert lines[0].startswith(f"roszen {argv[0]} {argv[1]}: argument {name}:") and value in lines[0]
+    assert "usage" not in cap.err and cap.out == ""
+
+
+def test_missing_argument_is_one_line_exit_1(capsys):
+    assert main(["topic", "pub", "/x"], prog="roszen") == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "message_type" in err[0]
+
+
+def test_help_still_prints_usage(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["topic", "hz", "-h"], prog="roszen")
+    assert exc.value.code == 0
+    assert "--window" in capsys.readouterr().out
