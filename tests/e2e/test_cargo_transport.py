@@ -274,3 +274,21 @@ def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
     cands = msgs.get("/gnc/ctl/candidates", [])
     assert cands, "no candidates published"
     assert any(m.ns == "chosen" for arr in cands for m in arr.markers)
+
+
+def test_safety_filter_in_the_loop_is_transparent(tmp_path, config_dir, launches):
+    """safety:=true puts the CBF filter between the controller and the sim: the nominal flight
+    is unchanged (goal reached, no contact) and the filter reports no intervention."""
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=short_hop", "safety:=true")
+    launches.append(launch)
+    code = launch.wait(timeout=240.0)
+    assert code == 0, "\n".join(launch.lines[-40:])
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["success"], summary["reason"]
+    assert summary["contacts"] == 0
+    msgs = mcap_messages(run / "bag")
+    assert "/gnc/ctl/command_nominal" in msgs and "/gnc/ctl/command" in msgs
+    diag = msgs["/gnc/ctl/safety"][-1].status[0]
+    values = {kv.key: kv.value for kv in diag.values}
+    assert int(values["ticks"]) > 100 and int(values["active_ticks"]) == 0, values

@@ -8,7 +8,8 @@ waits for a tick's command before stepping on; the sim's default when unset), gu
 false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / flight_mode /
 robots (override the scenario: validated here with the scenario before any process starts,
 then built by sim_node, which publishes the result on /sim/scenario for the others),
-mission (true | false: run the mission client, default true), demo (true: fly
+mission (true | false: run the mission client, default true), safety (true | false: the CBF
+safety filter node between the controller and the sim, default false), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 With the mission running, the controller's death does not end the launch by itself: the sim's
@@ -81,6 +82,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     for key, value in overrides.items():     # the sim builds the scenario with the overrides
         sim_params[key] = ",".join(value) if isinstance(value, list) else value
     mission = ctx.flag("mission", True)
+    safety = ctx.flag("safety", False)
     port = ctx.port
     nodes = [
         NodeSpec("router", kind="router", command=["router", "--port", str(port)],
@@ -89,8 +91,12 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
                  parameters=[sim_params]),
         NodeSpec("planner_node", "astrobee_planning", "planner_node", parameters=[common]),
         NodeSpec(ctl_name, "astrobee_control", ctl_name,
-                 parameters=[ctl_params, {"use_sim_time": True}], required=not mission),
+                 parameters=[ctl_params, {"use_sim_time": True}], required=not mission,
+                 ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"] if safety else []),
     ]
+    if safety:    # the CBF filter between the controller and the sim
+        nodes.append(NodeSpec("safety_filter_node", "astrobee_control", "safety_filter_node",
+                              parameters=[{"use_sim_time": True}], required=not mission))
     if ctx.flag("record", True):
         bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
         nodes.append(NodeSpec("recorder", kind="recorder",
