@@ -9,7 +9,8 @@ false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / fligh
 robots (override the scenario: validated here with the scenario before any process starts,
 then built by sim_node, which publishes the result on /sim/scenario for the others),
 mission (true | false: run the mission client, default true), safety (true | false: the CBF
-safety filter node between the controller and the sim, default false), demo (true: fly
+safety filter node between the controller and the sim, default false), video (true | false:
+render one MP4 per leg into the run folder, default: with demo), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 With the mission running, the controller's death does not end the launch by itself: the sim's
@@ -118,3 +119,7 @@ def post_run(ctx: LaunchContext, status: int) -> None:
     bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
     if ctx.flag("record", True) and ctx.flag("mission", True):
         print(finalize(ctx.run_dir, bag_dir), flush=True)
+        if ctx.flag("video", ctx.flag("demo")):      # one video per leg (default with the demo)
+            from astrobee_bringup.render_bag import render_demo_legs
+            for path in render_demo_legs(ctx.run_dir, bag_dir):
+                print(f"[video] {path}", flush=True)
