@@ -47,6 +47,8 @@ class Recorder:
         self.subscriptions: dict[str, object] = {}
         self.received = 0
         self._skipped: set[str] = set()
+        self._probes: dict[str, dict] = {}     # topic -> {type: probe subscription} (several types)
+        self._warned: set[str] = set()
         self._changed = threading.Event()
         self._changed.set()
         node.context.graph.add_listener(self._changed.set)
@@ -64,31 +66,95 @@ class Recorder:
         return False
 
     def discover(self) -> None:
-        """Subscribe to every wanted topic that now has a publisher."""
-        from roszen import typestore
-        for topic, types in self.node.get_topic_names_and_types():
+        """Subscribe to every wanted topic that now has a publisher.
+
+        A liveliness token is only a claim: a peer may advertise a known topic with another
+        type. Publishers whose advertised type hash is not the hash of their advertised type
+        (or whose type is unknown) are ignored with a warning. If valid publishers still offer
+        several types, each type is subscribed and the first to deliver a sample is recorded
+        (a bag holds one type per topic); the others are dropped with a warning. A mere token
+        can so never hide the real publisher's data.
+        """
+        for topic, _types in self.node.get_topic_names_and_types():
             if topic in self.subscriptions or topic in self._skipped or not self.wanted(topic):
                 continue
             pubs = [e for e in self.node.get_publishers_info_by_topic(topic)
                     if e.node_name != self.node.get_name()]
             if not pubs:
                 continue
-            type_name = pubs[0].ros_type
-            if len({e.ros_type for e in pubs}) > 1:
-                log(f"topic '{topic}' has several types ({', '.join(types)}): recording "
-                    f"{type_name} only")
-            try:
-                msgdef = typestore.message_definition(type_name)
-                type_hash = pubs[0].type_hash or typestore.type_hash(type_name)
-            except (typestore.UnknownTypeError, ValueError) as exc:
-                self._skipped.add(topic)
-                log(f"skipping topic '{topic}': type {type_name} unknown ({exc})")
+            candidates = self._valid_types(topic, pubs)
+            if not candidates:
                 continue
+            if len(candidates) == 1:
+                type_name, (msgdef, type_hash) = next(iter(candidates.items()))
+                self._record(topic, type_name, msgdef, type_hash,
+                             [e.qos for e in pubs if e.ros_type == type_name])
+                continue
+            if topic in self._probes:
+                continue
+            log(f"topic '{topic}' is advertised with several types ({', '.join(candidates)}): "
+                f"recording the first that delivers a message")
+            self._probes[topic] = {
+                type_name: self.node.create_subscription(
+                    type_name, topic, self._probe_callback(topic, type_name, msgdef, type_hash, pubs),
+                    subscription_qos([e.qos for e in pubs if e.ros_type == type_name]), raw=True)
+                for type_name, (msgdef, type_hash) in candidates.items()}
+
+    def _valid_types(self, topic: str, pubs: list) -> dict:
+        """{type: (definition, hash)} of the publishers whose advertised hash matches their type."""
+        from roszen import typestore
+        out: dict = {}
+        for e in pubs:
+            try:
+                msgdef = typestore.message_definition(e.ros_type)
+                expected = typestore.type_hash(e.ros_type)
+            except (typestore.UnknownTypeError, ValueError) as exc:
+                self._warn_once(e.token, f"ignoring a publisher of '{topic}' from node {e.node_fqn}: "
+                                         f"type {e.ros_type} unknown ({exc})")
+                continue
+            if e.type_hash and e.type_hash != expected:
+                self._warn_once(e.token, f"ignoring a publisher of '{topic}' from node {e.node_fqn}: it "
+                                         f"advertises {e.ros_type} with type hash {e.type_hash}, which "
+                                         f"is not that type's hash {expected}")
+                continue
+            out.setdefault(e.ros_type, (msgdef, expected))
+        return out
+
+    def _warn_once(self, key: str, text: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            log(text)
+
+    def _record(self, topic: str, type_name: str, msgdef: str, type_hash: str, offered: list) -> None:
+        self.writer.add_topic(topic, type_name, msgdef, type_hash, offered)
+        self.subscriptions[topic] = self.node.create_subscription(
+            type_name, topic, self._callback(topic), subscription_qos(offered), raw=True)
+        log(f"Subscribed to topic '{topic}'")
+
+    def _probe_callback(self, topic: str, type_name: str, msgdef: str, type_hash: str, pubs: list):
+        """First sample of one candidate type: that type is recorded, the other probes end."""
+        won = []
+        write = self._callback(topic)
+
+        def on_sample(data: bytes) -> None:
+            if won:
+                write(data)
+                return
+            probes = self._probes.get(topic)
+            if probes is None or topic in self.subscriptions:
+                return   # another type won (samples already queued for this probe)
+            won.append(True)
             offered = [e.qos for e in pubs if e.ros_type == type_name]
             self.writer.add_topic(topic, type_name, msgdef, type_hash, offered)
-            self.subscriptions[topic] = self.node.create_subscription(
-                type_name, topic, self._callback(topic), subscription_qos(offered), raw=True)
+            self.subscriptions[topic] = probes.pop(type_name)
+            for other, sub in probes.items():
+                self.node.destroy_subscription(sub)
+                log(f"topic '{topic}': recording {type_name}; no message came as {other}, "
+                    f"whose publisher advertises a type the data does not have")
+            del self._probes[topic]
             log(f"Subscribed to topic '{topic}'")
+            write(data)
+        return on_sample
 
     def _callback(self, topic: str):
         write = self.writer.write
@@ -121,3 +187,7 @@ class Recorder:
         self.node.context.graph.remove_listener(self._changed.set)
         for sub in self.subscriptions.values():
             self.node.destroy_subscription(sub)
+        for probes in self._probes.values():
+            for sub in probes.values():
+                self.node.destroy_subscription(sub)
+        self._probes.clear()
