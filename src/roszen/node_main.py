@@ -11,7 +11,7 @@ def run(factory: Callable[[list[str]], Any], argv: list[str] | None = None,
     """Build `factory(argv)` (an object holding a roszen Node as `.node`) and spin it.
 
     An exception of `errors` while building (a bad parameter) ends the program with one line
-    naming the executable and the cause, exit code 2, no traceback; the half-built node's
+    naming the executable and the cause, exit code 1, no traceback; the half-built node's
     sessions are closed so the process does not hang on zenoh's threads."""
     argv = sys.argv if argv is None else argv
     try:
@@ -21,7 +21,7 @@ def run(factory: Callable[[list[str]], Any], argv: list[str] | None = None,
         print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
         from . import context
         context.shutdown()
-        return 2
+        return 1
     try:
         wrapper.node.spin()
     except KeyboardInterrupt:
