@@ -616,7 +616,10 @@ class Node:
             raise RuntimeError(f"node {self.fully_qualified_name} has been destroyed")
 
     def create_publisher(self, msg_type: Any, topic: str, qos_profile: "QoSProfile | int" = 10,
-                         **_ignored) -> Publisher:
+                         *, callback_group: Any = None, event_callbacks: Any = None,
+                         qos_overriding_options: Any = None) -> Publisher:
+        """Publish on `topic` (rclpy's callback_group / event_callbacks / qos_overriding_options
+        are accepted and have no effect here; any other keyword is a TypeError)."""
         self._check_alive()
         pub = Publisher(self, _type_name(msg_type), topic, as_qos(qos_profile))
         self._pubs.append(pub)
@@ -624,7 +627,9 @@ class Node:
 
     def create_subscription(self, msg_type: Any, topic: str, callback: Callable,
                             qos_profile: "QoSProfile | int" = 10, *, raw: bool = False,
-                            max_bytes: Optional[int] = None, **_ignored) -> Subscription:
+                            max_bytes: Optional[int] = None, callback_group: Any = None,
+                            event_callbacks: Any = None, qos_overriding_options: Any = None
+                            ) -> Subscription:
         """Subscribe; samples above `max_bytes` (default ROSZEN_MAX_MESSAGE_BYTES or 16 MiB) are dropped."""
         self._check_alive()
         sub = Subscription(self, _type_name(msg_type), topic, callback, as_qos(qos_profile), raw=raw,
@@ -634,7 +639,7 @@ class Node:
 
     def create_service(self, srv_type: Any, srv_name: str, callback: Callable,
                        qos_profile: "QoSProfile | int" = SERVICES_DEFAULT, *, max_bytes: Optional[int] = None,
-                       **_ignored) -> Service:
+                       callback_group: Any = None) -> Service:
         """Serve; requests above `max_bytes` (default as subscriptions) get an error reply."""
         self._check_alive()
         srv = Service(self, _type_name(srv_type, "srv"), srv_name, callback, as_qos(qos_profile),
@@ -643,13 +648,15 @@ class Node:
         return srv
 
     def create_client(self, srv_type: Any, srv_name: str,
-                      qos_profile: "QoSProfile | int" = SERVICES_DEFAULT, **_ignored) -> Client:
+                      qos_profile: "QoSProfile | int" = SERVICES_DEFAULT, *,
+                      callback_group: Any = None) -> Client:
         self._check_alive()
         cli = Client(self, _type_name(srv_type, "srv"), srv_name, as_qos(qos_profile))
         self._clients.append(cli)
         return cli
 
-    def create_timer(self, timer_period_sec: float, callback: Callable, **_ignored) -> Timer:
+    def create_timer(self, timer_period_sec: float, callback: Callable, callback_group: Any = None,
+                     clock: Any = None) -> Timer:
         self._check_alive()
         t = Timer(self, timer_period_sec, callback, self._clock)
         self._timers.append(t)
