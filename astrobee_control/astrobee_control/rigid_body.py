@@ -40,27 +40,9 @@ class RigidBody:
 
     def step(self, force_body: np.ndarray, torque_body: np.ndarray, dt: float) -> None:
         f_b = np.asarray(force_body, float)
-        tau = np.asarray(torque_body, float) + _cross(-self.c, f_b)  # about the COM
+        tau = np.asarray(torque_body, float) + rot.cross(-self.c, f_b)  # about the COM
         self.v = self.v + rot.to_matrix(self.q) @ f_b / self.m * dt
         self.x = self.x + self.v * dt
-        wdot = self.inertia_inv @ (tau - _cross(self.w, self.inertia @ self.w))
+        wdot = self.inertia_inv @ (tau - rot.cross(self.w, self.inertia @ self.w))
         self.w = self.w + wdot * dt
-        self.q = _quat_step(self.q, self.w * dt)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _quat_step(q: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    """q * exp(dtheta) for a body-frame rotation vector dtheta, renormalised."""
-    th = float(np.sqrt(dtheta @ dtheta))
-    k = np.sin(0.5 * th) / th if th > 1e-12 else 0.5
-    bx, by, bz = dtheta * k
-    bw = np.cos(0.5 * th)
-    ax, ay, az, aw = q
-    out = np.array([aw * bx + ax * bw + ay * bz - az * by,
-                    aw * by - ax * bz + ay * bw + az * bx,
-                    aw * bz + ax * by - ay * bx + az * bw,
-                    aw * bw - ax * bx - ay * by - az * bz])
-    return out / np.sqrt(out @ out)
+        self.q = rot.step_body(self.q, self.w * dt)

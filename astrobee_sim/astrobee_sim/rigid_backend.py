@@ -32,24 +32,6 @@ from .simulation import sim_defaults, station
 _CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _quat_step(q: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    """q * exp(dtheta) for a body-frame rotation vector dtheta, renormalised."""
-    th = float(np.sqrt(dtheta @ dtheta))
-    k = np.sin(0.5 * th) / th if th > 1e-12 else 0.5
-    bx, by, bz = dtheta * k
-    bw = np.cos(0.5 * th)
-    ax, ay, az, aw = q
-    out = np.array([aw * bx + ax * bw + ay * bz - az * by,
-                    aw * by - ax * bz + ay * bw + az * bx,
-                    aw * bz + ax * by - ay * bx + az * bw,
-                    aw * bw - ax * bx - ay * by - az * bz])
-    return out / np.sqrt(out @ out)
-
-
 def _box_inertia(mass: float, size: Any) -> np.ndarray:
     x, y, z = np.asarray(size, dtype=float)
     return mass / 12.0 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
@@ -124,25 +106,25 @@ class RigidRobot:
 
     def step(self, dt: float, zero: bool = False) -> None:
         f_b = np.zeros(3) if zero else self.wrench[:3]
-        tau = (np.zeros(3) if zero else self.wrench[3:]) + _cross(self.arm, f_b)
+        tau = (np.zeros(3) if zero else self.wrench[3:]) + rot.cross(self.arm, f_b)
         self.v = self.v + rot.rotate(self.q, f_b) / self.m * dt
         self.x = self.x + self.v * dt
-        wdot = self.inertia_inv @ (tau - _cross(self.w, self.inertia @ self.w))
+        wdot = self.inertia_inv @ (tau - rot.cross(self.w, self.inertia @ self.w))
         self.w = self.w + wdot * dt
-        self.q = _quat_step(self.q, self.w * dt)
+        self.q = rot.step_body(self.q, self.w * dt)
 
     def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(position, orientation, velocity, angular velocity) of the robot point, world frame."""
         r_b = -self.c
         w_world = rot.rotate(self.q, self.w)
         pos = self.x + rot.rotate(self.q, r_b)
-        vel = self.v + rot.rotate(self.q, _cross(self.w, r_b))
+        vel = self.v + rot.rotate(self.q, rot.cross(self.w, r_b))
         return pos, self.q.copy(), vel, w_world
 
     def bag_state(self) -> BagState:
         pos, q, v, w = self.state()
         off = rot.rotate(q, self.bag_offset)
-        return BagState(pos + off, rot.multiply(q, self.bag_q), v + _cross(w, off), w, 0.0)
+        return BagState(pos + off, rot.multiply(q, self.bag_q), v + rot.cross(w, off), w, 0.0)
 
     def bag_points(self) -> np.ndarray:
         st = self.bag_state()

@@ -12,13 +12,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
-# Topics a flight's figures come from (relative to the robot namespace).
-POSE = "loc/truth/pose"
-COMMAND = "gnc/ctl/command"
-TRAJ = "gnc/ctl/traj"
+# Topics a flight's figures come from (relative to the robot namespace; msgconv names them).
+from astrobee.msgconv import COMMAND, MOB_STATE, POSE, TRAJ  # noqa: E402
 CONTACTS = "sim/contacts"
 BAG_STATE = "sim/bag/state"
-MOB_STATE = "mob/state"
 
 
 def _t(stamp: Any) -> float:
