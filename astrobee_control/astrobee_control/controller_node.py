@@ -44,6 +44,18 @@ COMMON_PARAMETERS: dict[str, Any] = {
 }
 
 
+def ekf_state(msg: Any) -> State:
+    """EkfState -> State (world position and velocity, BODY omega), checked and normalised;
+    ValueError/AttributeError/TypeError for a malformed or non-finite sample."""
+    state = State(mc.vec(msg.pose.position), mc.vec(msg.velocity), mc.quat(msg.pose.orientation),
+                  mc.vec(msg.omega))
+    vals = np.concatenate([state.position, state.velocity, state.orientation, state.omega])
+    if not np.all(np.isfinite(vals)) or np.linalg.norm(state.orientation) < 1e-6:
+        raise ValueError("non-finite state")
+    state.orientation = rot.normalize(state.orientation)
+    return state
+
+
 class ControllerNode:
     """Wiring of one ControlLaw to topics; callbacks never raise (bad samples are logged and
     dropped)."""
@@ -183,9 +195,8 @@ class ControllerNode:
 
     def _on_ekf(self, msg: Any) -> None:
         try:
-            state = State(mc.vec(msg.pose.position), mc.vec(msg.velocity),
-                          mc.quat(msg.pose.orientation), mc.vec(msg.omega))
-        except (AttributeError, TypeError) as exc:
+            state = ekf_state(msg)
+        except (AttributeError, TypeError, ValueError) as exc:
             self.log.warn(f"bad EKF state dropped: {exc}")
             return
         self._control(state, msg.header.stamp)

@@ -27,6 +27,7 @@ from astrobee import rotations as rot
 from roszen import node_main
 
 from . import mass as mp
+from .controller_node import ekf_state
 from .pd import State
 from .safety import SafetyFilter, box_corners, carried_load
 
@@ -156,12 +157,7 @@ class SafetyFilterNode:
 
     def _on_ekf(self, msg: Any) -> None:
         try:
-            state = State(mc.vec(msg.pose.position), mc.vec(msg.velocity),
-                          mc.quat(msg.pose.orientation), mc.vec(msg.omega))
-            vals = np.concatenate([state.position, state.velocity, state.orientation, state.omega])
-            if not np.all(np.isfinite(vals)) or np.linalg.norm(state.orientation) < 1e-6:
-                raise ValueError("non-finite state")
-            state.orientation = rot.normalize(state.orientation)
+            state = ekf_state(msg)
             t = mc.stamp_s(msg.header.stamp)
         except (AttributeError, TypeError, ValueError) as exc:
             self.log.warn(f"bad EKF state dropped: {exc}")

@@ -11,8 +11,6 @@ The launch description runs it as one of its processes (see astrobee_bringup/lau
 from __future__ import annotations
 
 import argparse
-import math
-import os
 import signal
 import sys
 import time
@@ -156,8 +154,10 @@ class MissionClient:
         node.create_subscription("astrobee_msgs/msg/Contacts", "/sim/contacts",
                                  lambda m: self.series.add_contacts(m), 10)
         node.create_subscription("astrobee_msgs/msg/BagState", "/sim/bag/state", self._on_bag, 10)
+        # every state change counts: a deep queue (a depth-1 queue keeps only the newest of a
+        # burst such as STOPPING -> STOPPED on a loaded machine)
         node.create_subscription("astrobee_msgs/msg/MotionState", pre + sm.MOB_STATE,
-                                 self._on_mob, latched)
+                                 self._on_mob, QoSProfile(depth=50, durability=Durability.TRANSIENT_LOCAL))
         node.create_subscription("astrobee_msgs/msg/Fault", "/sim/fault", self._on_fault, 10)
         self.seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", pre + "gnc/ctl/segment",
                                              latched)
