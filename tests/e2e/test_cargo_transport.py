@@ -172,7 +172,9 @@ def test_controller_killed_midflight(tmp_path, config_dir, launches):
     from astrobee import flight_modes
     run = tmp_path / "run"
     # lockstep_timeout: without a controller the sim steps on every 0.05 s (default 1 s)
-    launch = Launch(run, config_dir, "scenario:=short_hop", "lockstep_timeout:=0.05")
+    # a long flight (126 s of sim, >= 12 s of wall): it cannot end before the kill, even when
+    # the CONTROLLING line reaches this test late on a loaded machine
+    launch = Launch(run, config_dir, "scenario:=jem_to_node1", "lockstep_timeout:=0.05")
     launches.append(launch)
     launch.read_until(r"CONTROLLING: segment", timeout=120.0)   # the controller took it
     pids = launch.child_pids()
