@@ -56,6 +56,50 @@ def ekf_state(msg: Any) -> State:
     return state
 
 
+class CarriedBag:
+    """What a node knows of the carried bag: mass and size from /sim/scenario, each overridden
+    by the bag_mass / bag_size parameters when they are set (> 0)."""
+
+    def __init__(self, mass_param: float, size_param: list) -> None:
+        self.mass_param = float(mass_param)
+        size = list(size_param)
+        self.size_param = np.asarray(size, float) if len(size) == 3 and all(s > 0 for s in size) \
+            else None
+        self.scenario: tuple[float, np.ndarray] | None = None     # (mass, size) of /sim/scenario
+
+    def on_scenario(self, msg: Any) -> None:
+        """Take a ScenarioInfo; ValueError (and nothing changed) when its bag figures are bad."""
+        if not msg.carrying_bag:
+            self.scenario = None
+            return
+        size = mc.vec(msg.bag_size)
+        if not (np.isfinite(msg.bag_mass) and msg.bag_mass > 0 and np.all(np.isfinite(size))
+                and np.all(size > 0)):
+            raise ValueError(f"bag mass {msg.bag_mass} / size {size.tolist()}")
+        self.scenario = (float(msg.bag_mass), size)
+
+    def figures(self) -> tuple[float, np.ndarray] | None:
+        """(mass, size) of the carried bag, or None when neither parameters nor scenario say."""
+        base = self.scenario
+        mass = self.mass_param if self.mass_param > 0 else (base[0] if base else None)
+        size = self.size_param if self.size_param is not None else (base[1] if base else None)
+        return None if mass is None or size is None else (mass, size)
+
+    def observe(self, msg: Any) -> BagObservation | None:
+        """A BagState as a BagObservation, None when the bag is not held or its figures are not
+        known; ValueError for a non-finite pose."""
+        attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
+        figures = self.figures()
+        if not attached or figures is None:
+            return None
+        p_bag, q_bag = mc.pose(msg.pose)
+        if not (np.all(np.isfinite(p_bag)) and np.all(np.isfinite(q_bag))
+                and float(q_bag @ q_bag) > 1e-12):
+            raise ValueError("non-finite bag pose")
+        return BagObservation(p_bag, rot.normalize(q_bag), mc.vec(msg.velocity), mc.vec(msg.omega),
+                              True, figures[0], figures[1], str(msg.model))
+
+
 class ControllerNode:
     """Wiring of one ControlLaw to topics; callbacks never raise (bad samples are logged and
     dropped)."""
@@ -76,16 +120,12 @@ class ControllerNode:
         self.truth_omega_frame = str(values["truth_omega_frame"])
         if self.truth_omega_frame not in ("world", "body"):
             raise ValueError(f"truth_omega_frame must be world or body, not {self.truth_omega_frame!r}")
-        self.bag_mass_param = float(values["bag_mass"])
-        size = list(values["bag_size"])
-        self.bag_size_param = np.asarray(size, float) if len(size) == 3 and all(s > 0 for s in size) \
-            else None
+        self.bag = CarriedBag(values["bag_mass"], values["bag_size"])
         rate = float(values["candidates_rate"])
         self.candidates_period = 1.0 / rate if rate > 0 else float("inf")
         mode = flight_modes.get(str(values["flight_mode"]) or None)
         law_params = {k: values[k] for k in (parameters or {})}
         self.law: ControlLaw = make_law(mode, mp.robot(), law_params)
-        self.scenario_bag: tuple[float, np.ndarray] | None = None   # (mass, size) from /sim/scenario
         self._last_stamp: float | None = None
         self._last_state: State | None = None
         self._last_segment_key: tuple[int, int] | None = None
@@ -123,26 +163,13 @@ class ControllerNode:
     # ---- inputs -----------------------------------------------------------------------
     def _on_scenario(self, msg: Any) -> None:
         try:
-            if msg.carrying_bag:
-                size = mc.vec(msg.bag_size)
-                if not (np.isfinite(msg.bag_mass) and msg.bag_mass > 0 and np.all(size > 0)):
-                    raise ValueError(f"bag mass {msg.bag_mass} / size {size.tolist()}")
-                self.scenario_bag = (float(msg.bag_mass), size)
-                self.log.info(f"scenario {msg.name}: carrying a {msg.bag_model} bag of "
-                              f"{msg.bag_mass:.1f} kg")
-            else:
-                self.scenario_bag = None
+            self.bag.on_scenario(msg)
         except (AttributeError, TypeError, ValueError) as exc:
             self.log.warn(f"bad scenario description dropped: {exc}")
-
-    def _bag_figures(self) -> tuple[float, np.ndarray] | None:
-        """Mass and size of the carried bag: parameters when set, else the scenario's."""
-        base = self.scenario_bag
-        mass = self.bag_mass_param if self.bag_mass_param > 0 else (base[0] if base else None)
-        size = self.bag_size_param if self.bag_size_param is not None else (base[1] if base else None)
-        if mass is None or size is None:
-            return None
-        return mass, size
+            return
+        if self.bag.scenario:
+            self.log.info(f"scenario {msg.name}: carrying a {msg.bag_model} bag of "
+                          f"{msg.bag_mass:.1f} kg")
 
     def _on_segment(self, msg: Any) -> None:
         try:
@@ -170,28 +197,23 @@ class ControllerNode:
 
     def _on_bag(self, msg: Any) -> None:
         try:
-            attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
-            figures = self._bag_figures()
             state = self._last_state
-            if not attached or state is None or figures is None:
-                if self._carrying:
-                    self.law.observe_bag(None, state)
-                    self._carrying = False
-                    self.log.info("bag released: robot mass only")
-                return
-            p_bag, q_bag = mc.pose(msg.pose)
-            if not (np.all(np.isfinite(p_bag)) and np.all(np.isfinite(q_bag))):
-                raise ValueError("non-finite bag pose")
-            obs = BagObservation(p_bag, rot.normalize(q_bag), mc.vec(msg.velocity), mc.vec(msg.omega),
-                                 True, figures[0], figures[1], str(msg.model))
-            self.law.observe_bag(obs, state)
-            if not self._carrying:
-                offset, _ = obs.offset_in(state)
-                self.log.info(f"bag attached: {figures[0]:.1f} kg at "
-                              f"{np.round(offset, 3).tolist()} m (body frame)")
-            self._carrying = True
+            obs = self.bag.observe(msg) if state is not None else None
         except (ValueError, AttributeError, TypeError) as exc:
             self.log.warn(f"bad bag state dropped: {exc}")
+            return
+        if obs is None:
+            if self._carrying:
+                self.law.observe_bag(None, state)
+                self._carrying = False
+                self.log.info("bag released: robot mass only")
+            return
+        self.law.observe_bag(obs, state)
+        if not self._carrying:
+            offset, _ = obs.offset_in(state)
+            self.log.info(f"bag attached: {obs.mass:.1f} kg at "
+                          f"{np.round(offset, 3).tolist()} m (body frame)")
+        self._carrying = True
 
     def _on_ekf(self, msg: Any) -> None:
         try:

@@ -23,11 +23,10 @@ import numpy as np
 
 from astrobee import flight_modes
 from astrobee import msgconv as mc
-from astrobee import rotations as rot
 from roszen import node_main
 
 from . import mass as mp
-from .controller_node import ekf_state
+from .controller_node import CarriedBag, ekf_state
 from .pd import State
 from .safety import SafetyFilter, box_corners, carried_load
 
@@ -59,15 +58,11 @@ class SafetyFilterNode:
         margin = float(values["margin"])
         if not (np.isfinite(margin) and 0.0 <= margin < 0.5):
             raise ValueError(f"margin must be in [0, 0.5) m, not {margin}")
-        self.bag_mass_param = float(values["bag_mass"])
-        size = list(values["bag_size"])
-        self.bag_size_param = (np.asarray(size, float) if len(size) == 3 and all(s > 0 for s in size)
-                               else None)
+        self.bag = CarriedBag(values["bag_mass"], values["bag_size"])
         rate = float(values["diagnostics_rate"])
         self.diag_period = 1.0 / rate if rate > 0 else float("inf")
         self.robot_mass = mp.robot()
         self.filter = SafetyFilter(mode, self.robot_mass, margin=margin)
-        self.scenario_bag: tuple[float, np.ndarray] | None = None
         self.extent: list = []
         self._bag_key: tuple | None = None       # rounded offset/rotation of the carried bag
         self._state: State | None = None
@@ -103,23 +98,12 @@ class SafetyFilterNode:
 
     def _on_scenario(self, msg: Any) -> None:
         try:
-            if msg.carrying_bag:
-                size = mc.vec(msg.bag_size)
-                if not (np.isfinite(msg.bag_mass) and msg.bag_mass > 0 and np.all(size > 0)
-                        and np.all(np.isfinite(size))):
-                    raise ValueError(f"bag mass {msg.bag_mass} / size {size.tolist()}")
-                self.scenario_bag = (float(msg.bag_mass), size)
-            else:
-                self.scenario_bag = None
-                self._release()
+            self.bag.on_scenario(msg)
         except (AttributeError, TypeError, ValueError) as exc:
             self.log.warn(f"bad scenario description dropped: {exc}")
-
-    def _bag_figures(self) -> tuple[float, np.ndarray] | None:
-        base = self.scenario_bag
-        mass = self.bag_mass_param if self.bag_mass_param > 0 else (base[0] if base else None)
-        size = self.bag_size_param if self.bag_size_param is not None else (base[1] if base else None)
-        return None if mass is None or size is None else (mass, size)
+            return
+        if self.bag.scenario is None:
+            self._release()
 
     def _release(self) -> None:
         if self._bag_key is not None:
@@ -130,26 +114,22 @@ class SafetyFilterNode:
     def _on_bag(self, msg: Any) -> None:
         try:
             attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
-            figures, state = self._bag_figures(), self._state
-            if not attached or figures is None or state is None:
+            state = self._state
+            obs = self.bag.observe(msg) if state is not None else None
+            if obs is None:
                 if not attached:
                     self._release()
                 return
-            p_bag, q_bag = mc.pose(msg.pose)
-            if not (np.all(np.isfinite(p_bag)) and np.all(np.isfinite(q_bag))
-                    and float(q_bag @ q_bag) > 1e-12):
-                raise ValueError("non-finite bag pose")
-            offset = rot.rotate_inverse(state.orientation, p_bag - state.position)
-            r_rel = rot.to_matrix(state.orientation).T @ rot.to_matrix(rot.normalize(q_bag))
+            offset, r_rel = obs.offset_in(state)
             # a held bag sways by millimetres: rebuild the envelope only when it moved by 1 cm
-            key = (tuple(np.round(offset, 2)), tuple(np.round(r_rel, 2).ravel()), figures[0])
+            key = (tuple(np.round(offset, 2)), tuple(np.round(r_rel, 2).ravel()), obs.mass)
             if key == self._bag_key:
                 return
-            mprops, com = carried_load(self.robot_mass, figures[0], figures[1], offset, r_rel)
+            mprops, com = carried_load(self.robot_mass, obs.mass, obs.size, offset, r_rel)
             self.filter.set_mass(mprops, com)
-            self.extent = box_corners(offset, figures[1], r_rel)
+            self.extent = box_corners(offset, obs.size, r_rel)
             if self._bag_key is None:
-                self.log.info(f"bag attached: {figures[0]:.1f} kg at "
+                self.log.info(f"bag attached: {obs.mass:.1f} kg at "
                               f"{np.round(offset, 3).tolist()} m (body frame)")
             self._bag_key = key
         except (ValueError, AttributeError, TypeError) as exc:
