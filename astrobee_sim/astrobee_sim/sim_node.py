@@ -639,22 +639,10 @@ def build(argv: list[str]) -> SimNode:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (`ros2 run astrobee_sim sim_node`): exit 0 when stopped, 1 for a bad start."""
+    from roszen import node_main
     from roszen.parameters import ParameterException
-    argv = sys.argv if argv is None else argv
-    try:
-        sn = build(argv)
-    except (config.ConfigError, ValueError, ParameterException) as exc:
-        print(f"sim_node: error: {exc}", file=sys.stderr, flush=True)
-        from roszen import context
-        context.shutdown()
-        return 1
-    try:
-        sn.spin()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sn.close()
-    return 0
+    return node_main.run(build, argv, errors=(config.ConfigError, ValueError, ParameterException),
+                         prog="sim_node")
 
 
 if __name__ == "__main__":
