@@ -18,6 +18,7 @@ import roszen
 from roszen import Durability, QoSProfile
 
 from astrobee import config
+from astrobee import msgconv as mc
 from roszen import node_main
 
 from . import conversions as cv
@@ -45,8 +46,8 @@ class PlannerNode:
         self.path_pub = self.node.create_publisher("nav_msgs/msg/Path", "/mob/planner/path", latched)
         self.node.create_subscription("astrobee_msgs/msg/FlightMode", "/mob/flight_mode",
                                       self._on_flight_mode, latched)
-        self.node.create_service("astrobee_msgs/srv/PlanGlobal", "/mob/planner/global", self._global)
-        self.node.create_service("astrobee_msgs/srv/PlanLocal", "/mob/planner/local", self._local)
+        self.node.create_service("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL, self._global)
+        self.node.create_service("astrobee_msgs/srv/PlanLocal", mc.PLANNER_LOCAL, self._local)
         planner.cached_safe_set(0.0)      # build the safe set before the first request
         self.log.info(f"planner ready (sample rate {self.sample_rate} Hz, "
                       f"default flight mode {self.default_mode})")

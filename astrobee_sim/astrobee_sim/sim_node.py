@@ -360,7 +360,7 @@ class SimNode:
         ekf.header = ps.header
         ekf.child_frame_id = f"{name}/body" if name else "body"
         ekf.pose = ps.pose
-        ekf.confidence = 0
+        ekf.confidence = mc.Confidence.GOOD
         ts = M["tfs"]()
         ts.header = ps.header
         ts.child_frame_id = ekf.child_frame_id

@@ -151,9 +151,9 @@ class MissionClient:
                                  lambda m: self.series.add_command(m), 10)
         node.create_subscription("astrobee_msgs/msg/ControlState", pre + sm.TRAJ,
                                  lambda m: self.series.add_traj(m), 10)
-        node.create_subscription("astrobee_msgs/msg/Contacts", "/sim/contacts",
+        node.create_subscription("astrobee_msgs/msg/Contacts", mc.CONTACTS,
                                  lambda m: self.series.add_contacts(m), 10)
-        node.create_subscription("astrobee_msgs/msg/BagState", "/sim/bag/state", self._on_bag, 10)
+        node.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
         # every state change counts: a deep queue (a depth-1 queue keeps only the newest of a
         # burst such as STOPPING -> STOPPED on a loaded machine)
         node.create_subscription("astrobee_msgs/msg/MotionState", pre + sm.MOB_STATE,
@@ -161,9 +161,9 @@ class MissionClient:
         node.create_subscription("astrobee_msgs/msg/Fault", "/sim/fault", self._on_fault, 10)
         self.seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", pre + "gnc/ctl/segment",
                                              latched)
-        self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", "/mob/planner/global")
-        self.reset_cli = node.create_client("astrobee_msgs/srv/Reset", "/sim/reset")
-        self.control_cli = node.create_client("astrobee_msgs/srv/SimControl", "/sim/control")
+        self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL)
+        self.reset_cli = node.create_client("astrobee_msgs/srv/Reset", mc.SIM_RESET)
+        self.control_cli = node.create_client("astrobee_msgs/srv/SimControl", mc.SIM_CONTROL)
 
     # ---- callbacks ----------------------------------------------------------------------
     def _on_pose(self, msg: Any) -> None:
