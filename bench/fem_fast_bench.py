@@ -16,26 +16,13 @@ import numpy as np
 
 from astrobee_sim.bags.fem_rollout import FemRollout
 from astrobee_sim.simulation import Simulation
-from sim_rtf import goal_at, pd_wrench
+from sim_rtf import library_rtf as sim_rtf_library
 
 
 def library_rtf(solver: str, res: int, seconds: float) -> tuple[float, int]:
-    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=res, fem_solver=solver)
-    try:
-        start, q0 = sim.robot_state()[:2]
-        nodes = len(sim.bag.points())
-        t0, tick = time.perf_counter(), 0
-        while sim.time < seconds:
-            pos, q, v, w = sim.robot_state()
-            sim.command(pd_wrench(pos, q, v, w, goal_at(sim.time, start), q0))
-            tick += 1
-            sim.step(max(1, int(round(tick * 0.016 / sim.dt)) - sim.steps))
-            sim.bag_state()
-            sim.clearance()
-            sim.contacts()
-        return sim.time / (time.perf_counter() - t0), nodes
-    finally:
-        sim.close()
+    """sim_rtf's library loop with the FEM bag on `solver`: (real-time factor, nodes)."""
+    wall, _, nodes = sim_rtf_library("fem", res, seconds, fem_solver=solver)
+    return wall, nodes
 
 
 def batched(res: int, k: int, seconds: float) -> tuple[float, int]:
