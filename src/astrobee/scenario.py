@@ -33,6 +33,11 @@ def bag_variants() -> tuple[str, ...]:
     return tuple(config.bags()["handles"])
 
 
+def default_fem_solver() -> str:
+    """The FEM solver a bag gets when none is named (config/bags.yaml models.fem.solver)."""
+    return str(config.bags().get("models", {}).get("fem", {}).get("solver", "fast"))
+
+
 def _vec(value: Any, n: int, what: str) -> tuple[float, ...]:
     try:
         arr = np.asarray(value, dtype=float).reshape(-1)
@@ -69,7 +74,7 @@ class BagSpec:
     size: tuple[float, float, float] = (0.50, 0.42, 0.25)
     mass: float = 10.0
     resolution: int = 0            # FEM target node count; 0 = bags.yaml's
-    solver: str = "bullet"         # FEM solver: bullet (reference) | fast
+    solver: str = field(default_factory=default_fem_solver)   # FEM: fast (default) | bullet (reference)
 
     def validate(self) -> None:
         if self.model not in BAG_MODELS:
@@ -165,7 +170,7 @@ class Scenario:
                           _vec(raw_bag.get("size", default["size"]), 3, "bag size"),
                           float(raw_bag.get("mass", default["mass"])),
                           int(raw_bag.get("resolution", 0) or 0),
-                          str(raw_bag.get("solver", "bullet")))
+                          str(raw_bag.get("solver") or default_fem_solver()))
             bag.validate()
             if bag.handles != len(robots) and bag.handles == 2 and len(robots) == 1:
                 pass   # a two-handle bag held by one robot: the second handle hangs free

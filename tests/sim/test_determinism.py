@@ -19,9 +19,10 @@ def stream(sim, ticks=60):
     return np.array(out)
 
 
-@pytest.mark.parametrize("model", ["none", "rigid", "composite", "fem"])
+@pytest.mark.parametrize("model", ["none", "rigid", "composite", "fem", "fem-bullet"])
 def test_same_seed_same_stream(make_sim, model):
-    kw = dict(bag_model=model, bag_resolution=200)
+    solver = "bullet" if model == "fem-bullet" else None        # fem alone: the default (fast)
+    kw = dict(bag_model=model.split("-")[0], bag_resolution=200, fem_solver=solver)
     sc = dict(__import__("astrobee").config.scenario("node2_to_jem_bag"), initial_position_noise=0.02)
     a = stream(make_sim(sc, seed=7, **kw))
     b = stream(make_sim(sc, seed=7, **kw))

@@ -31,7 +31,10 @@ def drive(sim, ticks):
 
 @pytest.mark.parametrize("model", MODELS)
 def test_snapshot_restore(make_sim, model):
-    sim = make_sim("node2_to_jem_bag", bag_model=model, bag_resolution=200)
+    # fem here is Bullet's soft body (its restore limits are what this test states); the fast
+    # solver's bit-identical restore is tested in test_fem_fast.py
+    sim = make_sim("node2_to_jem_bag", bag_model=model, bag_resolution=200,
+                   fem_solver="bullet" if model == "fem" else None)
     drive(sim, 60)
     rigid0, nodes0 = full_state(sim)
     bag0 = sim.bag.state()

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from astrobee.scenario import BAG_MODELS as MODELS
-from astrobee.scenario import FEM_SOLVERS
+from astrobee.scenario import FEM_SOLVERS, default_fem_solver
 
 from .base import VARIANTS, Bag, BagError, BagState, handle_dirs
 
@@ -10,10 +10,11 @@ from .base import VARIANTS, Bag, BagError, BagState, handle_dirs
 def make_bag(model: str, client: int, variant: str = "front", **kw) -> Bag:
     """Build a bag model in a pybullet client.
 
-    fem takes `solver`: "bullet" (pybullet's soft body, the reference; needs a deformable-world
-    client) or "fast" (the same tet mesh integrated by fem_fast, outside pybullet)."""
+    fem takes `solver`: "fast" (the default, config/bags.yaml: the tet mesh integrated by fem_fast,
+    outside pybullet) or "bullet" (pybullet's soft body, the reference; needs a deformable-world
+    client)."""
     handle_dirs(variant)   # raises BagError for an unknown variant
-    solver = kw.pop("solver", None) or "bullet"
+    solver = kw.pop("solver", None) or default_fem_solver()
     if model == "fem" and solver not in FEM_SOLVERS:
         raise BagError(f"unknown fem solver {solver!r}; known: {', '.join(FEM_SOLVERS)}")
     if model == "fem" and solver == "fast":
