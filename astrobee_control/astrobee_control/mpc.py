@@ -22,7 +22,7 @@ candidates share one rotation per rollout step.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -317,3 +317,41 @@ def _interp_quat(traj: SampledTrajectory, times: np.ndarray) -> np.ndarray:
     (hemisphere-aligned) samples, renormalised (a fine stand-in for slerp at 10 Hz samples)."""
     q = np.stack([np.interp(times, traj.t, traj.orientation[:, k]) for k in range(4)], -1)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+_CFG = asdict(MpcConfig())
+# the MPC's parameters beyond every controller's (name -> default): mpc_controller_node declares
+# them as ROS parameters, in-process flights (astrobee_lab) read them too
+PARAMETERS = {**{k: _CFG[k] for k in ("samples", "horizon", "replan_period", "rollout_dt",
+                                      "sigma_position", "sigma_velocity", "w_track", "w_collision",
+                                      "w_clearance", "clearance_margin", "w_effort", "w_relvel",
+                                      "seed")},
+              "model": "reduced", "handle": "fem", "pybullet_bag": "constraint", "workers": 2,
+              "settle_time": 5.0}
+
+
+def make_rollout_model(params: dict) -> RolloutModel:
+    """The rollout model the parameters name (ValueError with one line otherwise)."""
+    model = str(params.get("model", "reduced"))
+    if model == "reduced":
+        from .reduced_model import ReducedModel, identified_handles
+        handles = identified_handles()
+        name = str(params.get("handle", "fem"))
+        if name not in handles:
+            raise ValueError(f"no identified handle {name!r} in config/reduced_models.yaml; "
+                             f"known: {', '.join(handles) or 'none'}")
+        return ReducedModel(handles[name], handles)
+    if model == "pybullet":
+        from .rollout_pybullet import PybulletModel
+        return PybulletModel(int(params.get("workers", 2)), str(params.get("pybullet_bag", "constraint")))
+    raise ValueError(f"unknown model {model!r}; known: {', '.join(MODELS)}")
+
+
+def make_mpc_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> MpcLaw:
+    """The MPC law of the parameters (PARAMETERS' names; ValueError with one line for a bad
+    value). mpc_controller_node and in-process flights build their law here."""
+    config = MpcConfig.from_params(params)
+    settle = float(params.get("settle_time", 5.0))
+    if not settle > 0:
+        raise ValueError(f"settle_time must be > 0 s, got {settle:g}")
+    return MpcLaw(flight_mode, mass, make_rollout_model(params), config, settle_time=settle)

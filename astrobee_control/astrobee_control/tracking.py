@@ -29,6 +29,13 @@ STATE_NAMES = {0: "INITIALIZING", 1: "IDLE", 2: "STOPPED", 3: "IDLING", 4: "STOP
 STOP_SPEED = 0.01    # m/s: "at rest" when stopping
 STOP_OMEGA = 0.02    # rad/s
 
+# the PD law's parameters beyond every controller's (name -> default): pd_controller_node
+# declares them as ROS parameters, in-process flights (astrobee_lab) read them too
+PARAMETERS = {
+    "settle_time": 5.0,       # s the end of a segment may take to come to rest within tolerance
+    "hold_on_start": True,    # hold the first pose seen (else IDLE: zero wrench until a segment)
+}
+
 
 @dataclass
 class Step:
@@ -157,3 +164,13 @@ class Tracker:
     def _step(self, out: Output, ref: Reference, mode: int) -> Step:
         event, self._pending_event = self._pending_event, ""
         return Step(out, ref, mode, self.state, event)
+
+
+def make_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> Tracker:
+    """The PD law of the parameters (PARAMETERS' names; ValueError with one line for a bad value).
+    pd_controller_node and in-process flights build their law here."""
+    params = {**PARAMETERS, **params}
+    settle = float(params["settle_time"])
+    if not settle > 0:
+        raise ValueError(f"settle_time must be > 0 s, got {settle:g}")
+    return Tracker(flight_mode, mass, settle_time=settle, hold_on_start=bool(params["hold_on_start"]))
