@@ -20,7 +20,7 @@ from .context import Context, get_default_context
 from .executor import Executor, _pending_interrupts, raise_pending
 from .log import Logger, severity_from_name
 from .names import apply_remap, expand_name, normalize_namespace, validate_node_name
-from .parameters import (InvalidParameterTypeException, InvalidParameterValueException, Parameter,
+from .parameters import (InvalidParameterTypeException, Parameter, check_value,
                          ParameterAlreadyDeclaredException, ParameterDescriptor,
                          ParameterImmutableException, ParameterNotDeclaredException, ParameterType,
                          SetParametersResult, coerce, infer_type)
@@ -658,7 +658,7 @@ class Node:
     def create_timer(self, timer_period_sec: float, callback: Callable, callback_group: Any = None,
                      clock: Any = None) -> Timer:
         self._check_alive()
-        t = Timer(self, timer_period_sec, callback, self._clock)
+        t = Timer(self, timer_period_sec, callback, self._clock if clock is None else clock)
         self._timers.append(t)
         self._executor.wake()
         return t
@@ -834,11 +834,7 @@ class Node:
         self._param_callbacks.remove(callback)
 
     def _check_range(self, p: Parameter, desc: ParameterDescriptor) -> None:
-        if p.type_ in (ParameterType.INTEGER, ParameterType.DOUBLE):
-            if desc.min_value is not None and p.value < desc.min_value:
-                raise InvalidParameterValueException(f"{p.name}={p.value} is below {desc.min_value}")
-            if desc.max_value is not None and p.value > desc.max_value:
-                raise InvalidParameterValueException(f"{p.name}={p.value} is above {desc.max_value}")
+        check_value(p, desc)   # range (non-finite is outside), validator
 
     def _validate(self, p: Parameter) -> Parameter:
         if p.name not in self._params:
@@ -867,6 +863,12 @@ class Node:
             if p.type_ == ParameterType.NOT_SET and p.name in self._params:
                 del self._params[p.name]
                 continue
+            apply = getattr(self._descriptors.get(p.name), "on_change", None)
+            if apply is not None:    # applied at run time; a refusal keeps the old value
+                try:
+                    apply(p.value)
+                except Exception as e:  # a failing apply must not kill the node
+                    return SetParametersResult(False, f"parameter {p.name!r} not applied: {e}")
             self._params[p.name] = p
             self._descriptors.setdefault(p.name, ParameterDescriptor(name=p.name, type=int(p.type_)))
             if p.name == "use_sim_time":
@@ -891,7 +893,8 @@ class Node:
             self._clock_sub = None
         self._clock.set_sim_time_active(on)
         for t in self._timers:
-            t._next = self._clock.now_ns() + t.timer_period_ns
+            if t.clock is self._clock:   # a timer on its own (wall) clock keeps its schedule
+                t._next = self._clock.now_ns() + t.timer_period_ns
         self._executor.wake()
 
 

@@ -1,9 +1,18 @@
-"""Typed node parameters (rclpy-like) with descriptors and set-time validation."""
+"""Typed node parameters (rclpy-like) with descriptors and set-time validation.
+
+Beyond rcl_interfaces' descriptor (read_only, ranges), a roszen descriptor may carry a
+`validator` (raises ValueError for a value the node cannot take) and an `on_change` callback
+(applies a new value while the node runs). A node states for each parameter either that it is
+read-only (`read_only()`: read once at start; `param set` is refused with "parameter 'X' is
+read-only", as in ROS 2) or how it is applied at run time (`runtime(apply, ...)`): a writable
+parameter with neither would report success and change nothing.
+"""
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 
 class ParameterType(enum.IntEnum):
@@ -125,7 +134,11 @@ class Parameter:
 
 @dataclass
 class ParameterDescriptor:
-    """Mirror of rcl_interfaces/msg/ParameterDescriptor (ranges not enforced beyond min/max)."""
+    """Mirror of rcl_interfaces/msg/ParameterDescriptor (a range is min_value..max_value,
+    inclusive; a non-finite value is outside every range), plus two roszen-only fields that
+    never go on the wire: `validator(value)` raises ValueError for a value the node refuses,
+    `on_change(value)` applies an accepted new value at run time (it may raise ValueError
+    too: the set then fails and the old value stays)."""
     name: str = ""
     type: int = 0
     description: str = ""
@@ -134,6 +147,58 @@ class ParameterDescriptor:
     dynamic_typing: bool = False
     min_value: Optional[float] = None
     max_value: Optional[float] = None
+    validator: Optional[Callable[[Any], None]] = field(default=None, repr=False, compare=False)
+    on_change: Optional[Callable[[Any], None]] = field(default=None, repr=False, compare=False)
+
+
+def read_only(description: str = "") -> ParameterDescriptor:
+    """A parameter read once at start: `param set` is refused."""
+    return ParameterDescriptor(description=description, read_only=True,
+                               additional_constraints="read-only: read at start")
+
+
+def runtime(apply: Callable[[Any], None], description: str = "", *,
+            min_value: Optional[float] = None, max_value: Optional[float] = None,
+            validator: Optional[Callable[[Any], None]] = None) -> ParameterDescriptor:
+    """A parameter applied at run time by `apply(value)`; numbers must be finite and, when
+    given, within [min_value, max_value]; `validator` refuses other bad values."""
+    rng = []
+    if min_value is not None:
+        rng.append(f">= {min_value:g}")
+    if max_value is not None:
+        rng.append(f"<= {max_value:g}")
+    return ParameterDescriptor(description=description, min_value=min_value, max_value=max_value,
+                               validator=validator, on_change=apply,
+                               additional_constraints=" and ".join(["finite", *rng]
+                                                                   ) + "; applied at run time")
+
+
+def _non_finite(value: Any) -> bool:
+    vals = value if isinstance(value, (list, tuple)) else [value]
+    return any(isinstance(v, float) and not math.isfinite(v) for v in vals)
+
+
+def check_value(p: "Parameter", desc: ParameterDescriptor) -> None:
+    """InvalidParameterValueException unless p's value is within the descriptor's range, finite
+    where the descriptor has a range or applies values at run time, and accepted by its
+    validator."""
+    if p.type_ == ParameterType.NOT_SET:
+        return
+    if (desc.on_change is not None or desc.min_value is not None or desc.max_value is not None) \
+            and _non_finite(p.value):
+        raise InvalidParameterValueException(f"parameter {p.name!r} must be finite, got {p.value!r}")
+    if p.type_ in (ParameterType.INTEGER, ParameterType.DOUBLE):
+        if desc.min_value is not None and p.value < desc.min_value:
+            raise InvalidParameterValueException(
+                f"parameter {p.name!r} must be >= {desc.min_value:g}, got {p.value!r}")
+        if desc.max_value is not None and p.value > desc.max_value:
+            raise InvalidParameterValueException(
+                f"parameter {p.name!r} must be <= {desc.max_value:g}, got {p.value!r}")
+    if desc.validator is not None:
+        try:
+            desc.validator(p.value)
+        except (ValueError, TypeError) as exc:
+            raise InvalidParameterValueException(f"parameter {p.name!r}: {exc}") from None
 
 
 @dataclass

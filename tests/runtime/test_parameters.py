@@ -124,3 +124,77 @@ def test_parameter_services_remote(router_env):
         th.join(5)
         server.shutdown()
         client.shutdown()
+
+
+def test_runtime_and_read_only_descriptors(router_env):
+    """A runtime parameter is applied on set (its callback sees the value); a bad value is
+    refused with a reason and changes nothing; a read-only one is refused as ROS 2 does."""
+    from roszen.parameters import read_only, runtime
+    node = roszen.Node("n2", argv=["--ros-args", "-p", "rate:=4.0"], use_global_arguments=False,
+                       start_parameter_services=False, enable_rosout=False)
+    applied = []
+
+    def even(v):
+        if v % 2:
+            raise ValueError("must be even")
+
+    try:
+        assert node.declare_parameter("rate", 1.0, runtime(applied.append, min_value=0.5,
+                                                           max_value=100.0)).value == 4.0
+        assert applied == []                       # the start value is the node's to read
+        node.declare_parameter("fixed", 3, read_only())
+        node.declare_parameter("count", 2, runtime(applied.append, validator=even))
+        assert node.set_parameter(roszen.Parameter("rate", value=20.0)).successful
+        assert applied == [20.0] and node.get_parameter("rate").value == 20.0
+        for bad in (float("nan"), float("inf"), 0.1, 1e6):
+            r = node.set_parameter(roszen.Parameter("rate", value=bad))
+            assert not r.successful and "rate" in r.reason, (bad, r.reason)
+        assert applied == [20.0] and node.get_parameter("rate").value == 20.0
+        r = node.set_parameter(roszen.Parameter("count", value=3))
+        assert (r.successful, r.reason) == (False, "parameter 'count': must be even")
+        assert node.set_parameter(roszen.Parameter("count", value=4)).successful
+        r = node.set_parameter(roszen.Parameter("fixed", value=4))
+        assert (r.successful, r.reason) == (False, "parameter 'fixed' is read-only")
+        assert node.describe_parameter("fixed").read_only
+        with pytest.raises(ValueError):            # a bad override ends the node at start
+            roszen.Node("n3", argv=["--ros-args", "-p", "rate:=.nan"], use_global_arguments=False,
+                        start_parameter_services=False, enable_rosout=False
+                        ).declare_parameter("rate", 1.0, runtime(applied.append, min_value=0.5))
+    finally:
+        node.destroy_node()
+
+
+def test_apply_failure_keeps_the_old_value(router_env):
+    from roszen.parameters import runtime
+
+    def refuse(v):
+        raise RuntimeError("hardware busy")
+
+    node = roszen.Node("n4", argv=[], use_global_arguments=False, start_parameter_services=False,
+                       enable_rosout=False)
+    try:
+        node.declare_parameter("gain", 1.0, runtime(refuse))
+        r = node.set_parameter(roszen.Parameter("gain", value=2.0))
+        assert not r.successful and "hardware busy" in r.reason
+        assert node.get_parameter("gain").value == 1.0
+    finally:
+        node.destroy_node()
+
+
+def test_wall_clock_timer_runs_while_sim_time_stands_still(router_env):
+    """create_timer(clock=Clock(False)) fires on wall time although /clock never advances
+    (what a node-loss watchdog needs when the simulator, the clock's source, is gone)."""
+    import time
+    node = roszen.Node("n5", argv=["--ros-args", "-p", "use_sim_time:=true"],
+                       use_global_arguments=False, start_parameter_services=False,
+                       enable_rosout=False)
+    try:
+        fired_sim, fired_wall = [], []
+        node.create_timer(0.05, lambda: fired_sim.append(1))
+        node.create_timer(0.05, lambda: fired_wall.append(1), clock=roszen.Clock(False))
+        end = time.monotonic() + 10.0
+        while len(fired_wall) < 3 and time.monotonic() < end:
+            node.spin_once(timeout_sec=0.05)
+        assert len(fired_wall) >= 3 and fired_sim == []
+    finally:
+        node.destroy_node()
