@@ -526,3 +526,86 @@ def _timeline(items, lim, p0, q0, overlap: float, stretch: float):
         pos.append(BezierPiece(np.tile(p0, (8, 1)), 0.0, 1e-3))
         att.append(QuaternionPolynomial.from_boundary(q0, z, z, q0, z, z, 1e-3, 0.0))
     return Trajectory(pos, att), steps
+
+
+# ---- formation plans from the robots' own poses (what planner_node serves) ---------------
+
+@dataclass
+class HeldTrajectory:
+    """A robot holding one handle: at `offset` in the formation frame and turned by `relative`
+    (its attitude in that frame), both fixed while the formation moves along `base`."""
+    base: Trajectory
+    offset: np.ndarray
+    relative: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        return self.base.duration
+
+    def sample(self, t) -> State:
+        st = OffsetTrajectory(self.base, self.offset).sample(t)
+        # rigidly attached: the same world-frame rates, the attitude turned by `relative`
+        st.quat = rot.normalize(rot.multiply(st.quat, self.relative))
+        return st
+
+    def sample_rate(self, rate: float) -> State:
+        if not rate > 0:
+            raise ValueError("sample rate must be positive")
+        d = self.duration
+        t = np.arange(int(np.floor(d * rate + 1e-9)) + 1) / rate
+        if t[-1] < d - 1e-9:
+            t = np.append(t, d)
+        return self.sample(t)
+
+
+@dataclass
+class RobotsPlan:
+    """One trajectory per robot (request order) and the formation plan they come from."""
+    robots: list[HeldTrajectory]
+    formation: FormationPlan
+    centre_start: np.ndarray
+    centre_goal: np.ndarray
+
+
+def plan_formation(starts, goal, bag_pose=None, bag_size=None,
+                   flight_mode: str | None = None) -> RobotsPlan:
+    """Formation plan for two robots holding one bag, from their start poses to the first
+    robot's goal pose (the second keeps its place in the formation).
+
+    starts: [(position, quaternion), (position, quaternion)] of the two robots, at rest;
+    goal: (position, quaternion) of the first robot. The formation frame is the first robot's
+    attitude, its centre the robots' midpoint. bag_pose (position, quaternion) places the bag:
+    its box (bag_size, L W H in its own frame; default config/bags.yaml) is grown by its centre's
+    distance from the midpoint and expressed in the formation frame, so the checked box holds
+    the real one. Raises PlanError (INVALID_COMMAND for a bad request)."""
+    if len(starts) != 2:
+        raise PlanError(INVALID_COMMAND, f"a formation plan needs exactly two robots, got {len(starts)}")
+    ps = [planner.validate_point(p, f"robot {i} start") for i, (p, _) in enumerate(starts)]
+    qs = [planner.validate_quat(q, f"robot {i} start") for i, (_, q) in enumerate(starts)]
+    g_p = planner.validate_point(goal[0], "goal")
+    g_q = planner.validate_quat(goal[1], "goal")
+    if np.linalg.norm(ps[0] - ps[1]) < 2 * bx.robot_radius() - 1e-6:
+        raise PlanError(INVALID_COMMAND, f"robots 0 and 1 start {np.linalg.norm(ps[0] - ps[1]):.3f} m "
+                                         f"apart: closer than two robot radii")
+    q_c = qs[0]                                  # formation frame: the first robot's attitude
+    centre = 0.5 * (ps[0] + ps[1])
+    offset = rot.rotate_inverse(q_c, ps[0] - centre)
+    rel = [rot.normalize(rot.multiply(rot.conjugate(q_c), q)) for q in qs]
+    size = np.array(config.bags()["default"]["size"], float) if bag_size is None \
+        else np.asarray(bag_size, float)
+    if size.shape != (3,) or not np.all(np.isfinite(size)) or np.any(size < 0):
+        raise PlanError(INVALID_COMMAND, "bag_size must be three non-negative numbers")
+    half = 0.5 * size
+    if bag_pose is not None:
+        b_p = planner.validate_point(bag_pose[0], "bag")
+        b_q = planner.validate_quat(bag_pose[1], "bag")
+        r = rot.to_matrix(q_c).T @ rot.to_matrix(b_q)           # bag frame -> formation frame
+        half = np.abs(r) @ half + np.abs(rot.rotate_inverse(q_c, b_p - centre))
+    # the first robot's goal pose -> the formation frame's goal (robot 0 has rel = identity)
+    goal_c = g_q
+    goal_centre = g_p - rot.rotate(goal_c, offset)
+    form = plan_two_robots(centre, q_c, goal_centre, goal_c, offset, flight_mode,
+                           bag_size=2.0 * half)
+    robots = [HeldTrajectory(form.centre.trajectory, offset, rel[0]),
+              HeldTrajectory(form.centre.trajectory, -offset, rel[1])]
+    return RobotsPlan(robots, form, centre, goal_centre)

@@ -1,6 +1,8 @@
-"""planner_node: /mob/planner/global and /mob/planner/local services, /mob/planner/path (latched).
+"""planner_node: /mob/planner/global, /mob/planner/local and /mob/planner/formation services,
+/mob/planner/path (latched).
 
-Thin wiring over planner.plan_global and local_planner.plan; bad requests get a failure response
+Thin wiring over planner.plan_global, local_planner.plan and multi_robot.plan_formation (two
+robots carrying one bag: one segment per robot); bad requests get a failure response
 with an Astrobee Motion result code and a message, and the node keeps serving.
 Parameters: sample_rate (Hz, default 10), flight_mode (default when a request names none and
 no /mob/flight_mode was received).
@@ -22,7 +24,7 @@ from astrobee import msgconv as mc
 from roszen import node_main
 
 from . import conversions as cv
-from . import local_planner, planner
+from . import local_planner, multi_robot, planner
 from .planner import INVALID_COMMAND, PLAN_FAILED, SUCCESS, PlanError
 
 
@@ -42,12 +44,15 @@ class PlannerNode:
         self.PoseStamped = roszen.message_class("geometry_msgs/msg/PoseStamped")
         self.GlobalResp = roszen.response_class("astrobee_msgs/srv/PlanGlobal")
         self.LocalResp = roszen.response_class("astrobee_msgs/srv/PlanLocal")
+        self.FormationResp = roszen.response_class("astrobee_msgs/srv/PlanFormation")
+        self.Segment = roszen.message_class("astrobee_msgs/msg/Segment")
         latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
         self.path_pub = self.node.create_publisher("nav_msgs/msg/Path", "/mob/planner/path", latched)
         self.node.create_subscription("astrobee_msgs/msg/FlightMode", "/mob/flight_mode",
                                       self._on_flight_mode, latched)
         self.node.create_service("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL, self._global)
         self.node.create_service("astrobee_msgs/srv/PlanLocal", mc.PLANNER_LOCAL, self._local)
+        self.node.create_service("astrobee_msgs/srv/PlanFormation", mc.PLANNER_FORMATION, self._formation)
         planner.cached_safe_set(0.0)      # build the safe set before the first request
         self.log.info(f"planner ready (sample rate {self.sample_rate} Hz, "
                       f"default flight mode {self.default_mode})")
@@ -109,6 +114,50 @@ class PlannerNode:
             poses.append(ps)
         msg.poses = poses
         self.path_pub.publish(msg)
+
+    # ---- /mob/planner/formation --------------------------------------------------------
+    def _formation(self, req: Any) -> Any:
+        resp = self.FormationResp()
+        t0 = time.perf_counter()
+        try:
+            rate = self._rate(req.sample_rate)
+            names = [str(n) for n in req.robots]
+            if len(names) != len(req.starts):
+                raise PlanError(INVALID_COMMAND, f"{len(names)} robot names but {len(req.starts)} "
+                                                 f"start poses")
+            if len(set(names)) != len(names):
+                raise PlanError(INVALID_COMMAND, f"robot names must differ, got {names}")
+            starts = [cv.pose_to_arrays(s) for s in req.starts]
+            goal = cv.pose_to_arrays(req.goal)
+            bag_pose = cv.pose_to_arrays(req.bag_pose) if req.has_bag_pose else None
+            size = [req.bag_size.x, req.bag_size.y, req.bag_size.z]
+            mode = req.flight_mode or self.current_mode or self.default_mode
+            plan = multi_robot.plan_formation(starts, goal, bag_pose,
+                                              None if not any(size) else size, mode)
+            t_start = cv.time_of(req.start_time)
+            segs = []
+            for traj in plan.robots:
+                seg = self.Segment()
+                seg.header.frame_id = "world"
+                cv.set_time(seg.header.stamp, t_start)
+                seg.flight_mode = str(plan.formation.centre.trajectory.info.get("flight_mode", mode))
+                seg.segment = cv.states_to_msgs(traj.sample_rate(rate), self.ControlState, t_start)
+                segs.append(seg)
+            resp.robots, resp.segments = names, segs
+            resp.steps = list(plan.formation.steps)
+            resp.duration = plan.formation.centre.trajectory.duration
+            resp.success, resp.code = True, SUCCESS
+            resp.message = (f"{len(names)} robots, {len(plan.formation.steps)} steps, "
+                            f"{resp.duration:.1f} s")
+        except PlanError as exc:
+            resp.success, resp.code, resp.message = False, exc.code, str(exc)
+        except Exception as exc:  # a bug must not take the node down
+            self.log.error(f"formation planner crashed: {exc}\n{traceback.format_exc()}")
+            resp.success, resp.code, resp.message = False, PLAN_FAILED, f"internal error: {exc}"
+        resp.planning_time = time.perf_counter() - t0
+        self.log.info(f"formation plan: code {resp.code}, {resp.message} "
+                      f"({resp.planning_time:.3f} s)")
+        return resp
 
     # ---- /mob/planner/local ------------------------------------------------------------
     def _local(self, req: Any) -> Any:

@@ -33,6 +33,7 @@ SIM_RESET = "/sim/reset"
 SIM_CONTROL = "/sim/control"
 PLANNER_GLOBAL = "/mob/planner/global"
 PLANNER_LOCAL = "/mob/planner/local"
+PLANNER_FORMATION = "/mob/planner/formation"
 
 
 def ns(robot: str) -> str:

@@ -102,3 +102,35 @@ def test_formation_turns_while_moving_where_the_corridor_allows(a, b):
     sequential = sum(float(s.rsplit("(", 1)[1].split(" s")[0]) for s in f.steps
                      if s.startswith(("turn", "move")))
     assert f.centre.trajectory.duration < sequential
+
+
+def test_plan_formation_from_robot_poses():
+    """The scenario's two robots (facing away from each other, the bag between them): each
+    robot's trajectory starts at its own pose, keeps its attitude in the formation, and the
+    first robot ends at the goal; a bag placed off the midpoint is checked as a larger box."""
+    from astrobee.scenario import Scenario
+    sc = Scenario.load("two_robots_bag")
+    starts = [(np.array(r.position), np.array(r.orientation)) for r in sc.robots]
+    goal = (np.array(sc.goal_position), np.array(sc.goal_orientation))
+    plan = multi_robot.plan_formation(starts, goal, bag_size=[0.5, 0.42, 0.25])
+    t = np.linspace(0.0, plan.robots[0].duration, 500)
+    a, b = (r.sample(t) for r in plan.robots)
+    for st, (p, q) in zip((a, b), starts):
+        np.testing.assert_allclose(st.pos[0], p, atol=1e-9)
+        assert rot.angle_between(st.quat[0], q) < 1e-9
+    np.testing.assert_allclose(a.pos[-1], goal[0], atol=1e-9)
+    assert rot.angle_between(a.quat[-1], goal[1]) < 1e-9
+    np.testing.assert_allclose(np.linalg.norm(a.pos - b.pos, axis=1), 0.9, atol=1e-9)
+    turn = [rot.angle_between(x, y) for x, y in zip(a.quat, b.quat)]
+    np.testing.assert_allclose(turn, np.pi, atol=1e-6)
+    grown = multi_robot.plan_formation(starts, goal, (starts[0][0] * 0.5 + starts[1][0] * 0.5
+                                                      + [0, 0, 0.1], rot.IDENTITY), [0.5, 0.42, 0.25])
+    # the bag's axes in the formation frame (x along the robots' line = world -y), its
+    # height grown by its 0.1 m distance from the midpoint
+    np.testing.assert_allclose(grown.formation.bag_half, [0.21, 0.25, 0.125 + 0.1], atol=1e-9)
+    with pytest.raises(planner.PlanError) as e:
+        multi_robot.plan_formation(starts[:1], goal)
+    assert e.value.code == planner.INVALID_COMMAND
+    with pytest.raises(planner.PlanError) as e:
+        multi_robot.plan_formation([starts[0], starts[0]], goal)
+    assert e.value.code == planner.INVALID_COMMAND

@@ -111,3 +111,65 @@ def test_planner_node_serves_and_survives_bad_requests(planner_proc, client_node
     last = paths[-1].poses[-1].pose.position
     np.testing.assert_allclose([last.x, last.y, last.z], n2, atol=1e-6)
     assert planner_proc.poll() is None
+
+
+def _formation_req(starts, goal, names=("", "bumble"), **kw):
+    req = roszen.request_class("astrobee_msgs/srv/PlanFormation")()
+    req.robots = list(names)
+    poses = []
+    for p, q in starts:
+        m = roszen.message_class("geometry_msgs/msg/Pose")()
+        cv.set_pose(m, np.asarray(p, float), np.asarray(q, float))
+        poses.append(m)
+    req.starts = poses
+    cv.set_pose(req.goal, np.asarray(goal[0], float), np.asarray(goal[1], float))
+    req.flight_mode = kw.get("flight_mode", "nominal")
+    req.sample_rate = kw.get("sample_rate", 2.0)
+    req.start_time.sec = kw.get("start_sec", 0)
+    return req
+
+
+def test_planner_node_serves_formation_plans(planner_proc, client_node):
+    """Two robots and a bag Node 2 -> JEM: one segment per robot, same start stamp, the robots
+    keep their distance and attitudes in the formation, within the flight mode's speed; bad
+    requests get codes and the node keeps serving."""
+    from astrobee import flight_modes
+    from astrobee.scenario import Scenario
+
+    cli = client_node.create_client("astrobee_msgs/srv/PlanFormation", "/mob/planner/formation")
+    assert cli.wait_for_service(timeout_sec=30.0), "formation service never appeared"
+    sc = Scenario.load("two_robots_bag")
+    starts = [(r.position, r.orientation) for r in sc.robots]
+    goal = (sc.goal_position, sc.goal_orientation)
+    resp = cli.call(_formation_req(starts, goal, start_sec=7), timeout_sec=60.0)
+    assert resp.success and resp.code == planner.SUCCESS, resp.message
+    assert list(resp.robots) == ["", "bumble"] and len(resp.segments) == 2 and resp.steps
+    a, b = (cv.msgs_to_states(s.segment) for s in resp.segments)
+    for seg, st, (p, q) in zip(resp.segments, (a, b), starts):
+        assert seg.header.stamp.sec == 7 and abs(st.t[0] - 7.0) < 1e-9
+        assert abs(st.t[-1] - 7.0 - resp.duration) < 1e-6
+        np.testing.assert_allclose(st.pos[0], p, atol=1e-6)
+        assert rot.angle_between(st.quat[0], np.asarray(q)) < 1e-6
+        assert np.linalg.norm(st.vel, axis=1).max() <= flight_modes.get("nominal").hard_limit_vel
+    np.testing.assert_allclose(a.pos[-1], goal[0], atol=1e-6)
+    assert rot.angle_between(a.quat[-1], np.asarray(goal[1])) < 1e-6
+    d0 = np.linalg.norm(np.asarray(starts[0][0]) - np.asarray(starts[1][0]))
+    np.testing.assert_allclose(np.linalg.norm(a.pos - b.pos, axis=1), d0, atol=1e-6)
+    rel = [rot.angle_between(qa, qb) for qa, qb in zip(a.quat, b.quat)]
+    np.testing.assert_allclose(rel, rel[0], atol=1e-6)       # attitudes locked together
+
+    outside = [([0.0, 0.0, 0.0], rot.IDENTITY), starts[1]]
+    bad = [
+        (_formation_req(starts[:1], goal, names=[""]), planner.INVALID_COMMAND),       # one robot
+        (_formation_req(starts, goal, names=["", "b", "c"]), planner.INVALID_COMMAND),  # 3 names
+        (_formation_req(starts, goal, names=["x", "x"]), planner.INVALID_COMMAND),
+        (_formation_req(outside, goal), planner.VIOLATES_KEEP_IN),
+        (_formation_req(starts, ([0.0, 0.0, 0.0], rot.IDENTITY)), planner.VIOLATES_KEEP_IN),
+        (_formation_req(starts, goal, flight_mode="ludicrous"), planner.INVALID_FLIGHT_MODE),
+    ]
+    for req, code in bad:
+        r = cli.call(req, timeout_sec=30.0)
+        assert not r.success and r.code == code and r.message, (code, r.code, r.message)
+        assert not r.segments
+    r = cli.call(_formation_req(starts, goal), timeout_sec=60.0)
+    assert r.success and planner_proc.poll() is None
