@@ -6,6 +6,12 @@ a reset request is validated whole before the running world is cleared. `step()`
 the held, clipped body-frame wrenches; the propulsion watchdog zeroes a robot's wrench when no
 command came for `watchdog_timeout` seconds. Deterministic for a given scenario, seed and
 command sequence.
+
+Realism knobs (astrobee.realism; the scenario's `realism:` or the `realism=` override): the
+world is built with them and realism_effects.RealismEffects applies them: `ekf_state()` is the
+noisy, biased estimate (robot_state() stays the truth), `told_bag_mass()` the mass a controller
+is told, `step()` adds actuation noise, propulsion lag and disturbance pulses
+(`disturbance_log`). With every knob off none of it runs and nothing changes.
 """
 from __future__ import annotations
 
@@ -15,10 +21,13 @@ import numpy as np
 
 from astrobee import config, flight_modes
 from astrobee.flight_modes import FlightMode
+from astrobee.realism import Realism
+from astrobee.realism import resolve as resolve_realism
 from astrobee.scenario import Scenario, ScenarioError
 
 from .backend import BagInfo, Contact, check_seed, resolve_scenario
 from .bags import Bag, BagState, make_bag
+from .realism_effects import RealismEffects, bag_params
 from .robot import Robot
 from .world import World, build_pybullet
 
@@ -53,14 +62,17 @@ class Simulation:
                  bag_resolution: int | None = None, robots: list[str] | None = None,
                  flight_mode: str | None = None, wall_thickness: float | None = None,
                  wall_bodies: int = 64, fem_solver: str | None = None,
-                 bag_mass: float | None = None):
+                 bag_mass: float | None = None, realism: str | dict | Realism | None = None):
         """scenario: a name in config/scenarios (loaded with the bag_*/robots/flight_mode/
         fem_solver overrides, which also apply to later resets by name) or a Scenario as is.
-        Raises ScenarioError for a bad scenario or seed before pybullet is started."""
+        realism: a preset name, a mapping of knobs or a Realism replacing the scenario's (also
+        for later resets, a Scenario given whole included); None keeps the scenario's.
+        Raises ScenarioError for a bad scenario, realism or seed before pybullet is started."""
         self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
                           "bag_resolution": bag_resolution, "bag_mass": bag_mass, "robots": robots,
-                          "flight_mode": flight_mode, "fem_solver": fem_solver}
-        sc = resolve_scenario(scenario, None, self.overrides)
+                          "flight_mode": flight_mode, "fem_solver": fem_solver,
+                          "realism": None if realism is None else resolve_realism(realism)}
+        sc = self._resolve(scenario, None)
         seed = check_seed(seed)
         defaults = sim_defaults()
         self.dt = 1.0 / float(physics_rate or defaults.get("physics_rate", 350.0))
@@ -77,6 +89,7 @@ class Simulation:
         self.robots: dict[str, Robot] = {}
         self.bag: Bag | None = None
         self.scenario: Scenario | None = None
+        self.effects: RealismEffects | None = None
         self.reset(sc, seed)
 
     # ---- setup ---------------------------------------------------------------------------
@@ -88,15 +101,26 @@ class Simulation:
         """Rebuild the world from a scenario (None/'': the current one) and a seed (None: the
         current one). The request is validated first: a bad one raises ScenarioError and leaves
         the running world as it was."""
-        sc = resolve_scenario(scenario, self.scenario, self.overrides)
+        sc = self._resolve(scenario, self.scenario)
         seed = check_seed(getattr(self, "seed", 0) if seed is None else seed)
         self._build(sc, seed)
+
+    def _resolve(self, scenario: str | Scenario | None, current: Scenario | None) -> Scenario:
+        """resolve_scenario, the standing realism override applied to a Scenario given whole."""
+        sc = resolve_scenario(scenario, current, self.overrides)
+        forced = self.overrides.get("realism")
+        if forced is not None and sc.realism != forced:
+            sc = sc.override(realism=forced)
+        return sc
 
     def _build(self, sc: Scenario, seed: int) -> None:
         p, c = self.p, self.client
         bag = sc.bag
         fem = bag is not None and bag.model == "fem"
         soft = fem and bag.solver == "bullet"        # a pybullet soft body
+        # built (and checked: robot names of disturbances) before the old world is cleared
+        effects = (RealismEffects(sc.realism, seed, sc.robot_names, self.dt, bag is not None)
+                   if sc.realism.physical else None)
         p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD if soft else 0, physicsClientId=c)
         p.setGravity(0, 0, 0, physicsClientId=c)
         p.setTimeStep(self.dt, physicsClientId=c)
@@ -124,6 +148,7 @@ class Simulation:
                 if bag.resolution:
                     kw["resolution"] = int(bag.resolution)
                 kw["solver"] = bag.solver
+            kw.update(bag_params(bag.model, config.bags()["models"].get(bag.model, {}), sc.realism))
             self.bag = make_bag(bag.model, c, bag.variant, **kw)
             self.bag.attach(list(self.robots.values()))
         if self.gui:
@@ -137,6 +162,8 @@ class Simulation:
         self.last_command = {n: 0.0 for n in self.robots}
         self.fault = {n: False for n in self.robots}
         self.rejected = 0
+        self.effects = effects
+        self._stepper = effects if effects is not None and sc.realism.affects_stepping else None
 
     # ---- commands ------------------------------------------------------------------------
     def command(self, wrench_body, robot: str = "") -> bool:
@@ -164,7 +191,10 @@ class Simulation:
 
     # ---- stepping ------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
-        """Advance n physics steps."""
+        """Advance n physics steps (with actuation noise, lag and disturbances when on)."""
+        if self._stepper is not None:
+            self._stepper.step(self, n)
+            return
         p, c = self.p, self.client
         step_sim = p.stepSimulation
         robots = list(self.robots.items())
@@ -198,6 +228,35 @@ class Simulation:
 
     def robot_names(self) -> list[str]:
         return list(self.robots)
+
+    # ---- realism -------------------------------------------------------------------------
+    @property
+    def realism(self) -> Realism:
+        """The realism knobs in effect (the scenario's, or the override's)."""
+        return self.scenario.realism
+
+    def ekf_state(self, robot: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the robot's EKF would say: robot_state() (same frames) with the localization
+        bias and noise of the current physics step; robot_state() itself when they are off."""
+        state = self.robots[robot].state()
+        e = self.effects
+        if e is None or not e.realism.ekf_noisy:
+            return state
+        return e.ekf(robot, self.steps, state)
+
+    def told_bag_mass(self) -> float:
+        """The bag mass a controller is told (true mass x realism bag_mass_told); 0 without a bag."""
+        bag = self.scenario.bag
+        return 0.0 if bag is None else self.realism.told_mass(bag.mass)
+
+    @property
+    def disturbance_log(self) -> list[dict]:
+        """The disturbance pulses started so far: time, duration, target, robot, force, impulse."""
+        return [] if self.effects is None else list(self.effects.log)
+
+    def disturbance_schedule(self) -> list[dict]:
+        """Every pulse of this run as resolved from the seed (started or not)."""
+        return [] if self.effects is None else self.effects.schedule()
 
     def faulted(self, robot: str) -> bool:
         return self.fault[robot]
@@ -279,7 +338,8 @@ class Simulation:
         return {"state": sid, "bag": None if self.bag is None else self.bag.snapshot(),
                 "time": self.time, "steps": self.steps,
                 "cmd": {n: r.wrench_cmd.copy() for n, r in self.robots.items()},
-                "last": dict(self.last_command), "fault": dict(self.fault)}
+                "last": dict(self.last_command), "fault": dict(self.fault),
+                "realism": None if self.effects is None else self.effects.snapshot()}
 
     def restore(self, snap: dict) -> None:
         self.p.restoreState(stateId=snap["state"], physicsClientId=self.client)
@@ -291,6 +351,8 @@ class Simulation:
             r.wrench_cmd = snap["cmd"][n].copy()
         self.last_command = dict(snap["last"])
         self.fault = dict(snap["fault"])
+        if self.effects is not None and snap.get("realism") is not None:
+            self.effects.restore(snap["realism"])
 
     def close(self) -> None:
         try:

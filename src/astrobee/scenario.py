@@ -16,6 +16,8 @@ import numpy as np
 import yaml
 
 from . import config, flight_modes
+from .realism import Realism
+from .realism import resolve as resolve_realism
 
 BAG_MODELS = ("fem", "constraint", "composite", "rigid")
 FEM_SOLVERS = ("bullet", "fast")
@@ -119,12 +121,14 @@ class Scenario:
     face_forward: bool = False
     carry_extent_m: float | None = None     # planning margin for the carried bag (None: bags.yaml)
     initial_position_noise: float = 0.0
+    realism: Realism = field(default_factory=Realism)   # astrobee.realism knobs (default off)
     extra: dict = field(default_factory=dict, compare=False)   # keys we do not interpret
 
     # ---- loading --------------------------------------------------------------------------
     @classmethod
     def load(cls, name: str, **overrides: Any) -> "Scenario":
-        """config/scenarios/<name>.yaml, validated, with launch/parameter overrides applied."""
+        """config/scenarios/<name>.yaml, validated, with launch/parameter overrides applied
+        (`realism=`: a preset name, a mapping of knobs or a Realism, replacing the file's)."""
         check_name(name)
         try:
             data = config.scenario(name)
@@ -178,7 +182,7 @@ class Scenario:
         gp = _vec(goal["position"], 3, "goal position") if goal.get("position") is not None else None
         gq = _quat(goal.get("orientation", [0, 0, 0, 1]), "goal orientation")
         known = {"description", "flight_mode", "robots", "bag", "goal", "face_forward",
-                 "carry_extent", "initial_position_noise", "name"}
+                 "carry_extent", "initial_position_noise", "name", "realism"}
         ce = data.get("carry_extent")
         noise = float(data.get("initial_position_noise", 0.0) or 0.0)
         if not 0 <= noise <= 0.5:
@@ -188,17 +192,21 @@ class Scenario:
                    face_forward=bool(data.get("face_forward", False)),
                    carry_extent_m=None if ce is None else float(ce),
                    initial_position_noise=noise,
+                   realism=resolve_realism(data.get("realism")),
                    extra={k: v for k, v in data.items() if k not in known})
 
     def override(self, bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, bag_mass: float | None = None,
                  fem_solver: str | None = None, robots: list[str] | None = None,
-                 flight_mode: str | None = None) -> "Scenario":
+                 flight_mode: str | None = None, realism: Any = None) -> "Scenario":
         """The scenario with launch/parameter overrides applied (empty/None: keep), validated.
 
         bag_model 'none' removes the bag; a bag model given to a scenario without a bag adds the
-        default bag (config/bags.yaml) with that model."""
+        default bag (config/bags.yaml) with that model. realism (a preset name, a mapping of knobs
+        or a Realism; astrobee.realism) replaces the scenario's realism knobs."""
         sc = self
+        if realism is not None:
+            sc = replace(sc, realism=resolve_realism(realism))
         if flight_mode:
             try:
                 flight_modes.get(flight_mode)
@@ -275,6 +283,8 @@ class Scenario:
                          "orientation": list(self.goal_orientation)}
         if self.carry_extent_m is not None:
             d["carry_extent"] = self.carry_extent_m
+        if self.realism.enabled:
+            d["realism"] = self.realism.changed()
         return d
 
     def to_yaml(self) -> str:

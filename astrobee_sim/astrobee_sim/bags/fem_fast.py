@@ -71,6 +71,7 @@ class FastFemBag(Bag):
         self._pending: list = []                      # per robot: (id, link, F, at, tau, Fc, com, tauc)
         self._state: BagState | None = None
         self.last_penetration = 0.0
+        self.external: np.ndarray | None = None       # (N, 1, 3) N per node over the next step
 
     @property
     def body_ids(self) -> list[int]:
@@ -153,7 +154,7 @@ class FastFemBag(Bag):
         x, v = self.x, self.v
         grip = self._targets() if self._grasps else []
         x_prev = x.copy()
-        self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel)
+        self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel, self.external)
         flat_x, flat_v = x.reshape(-1, 3), v.reshape(-1, 3)
         self.last_penetration = collide_static_boxes(flat_x, flat_v, x_prev.reshape(-1, 3),
                                                      self.walls, self.margin, self.friction)
