@@ -11,9 +11,20 @@ chosen one). Service <ns>/gnc/ctl/stop (std_srvs/Trigger): hold the current pose
 
 One command per state sample, stamped with the state's stamp: at 62.5 Hz when the sim
 publishes at 62.5 Hz, on sim time in every clock mode (in lockstep the sim waits for it).
+
+Peer loss (wall clock: /clock stops with the sim): when every publisher of the state topic has
+left the graph (its liveliness token gone: the sim killed or cut off) the law stops and holds
+the last pose, commands stop with the states, /mob/state says "lost node <name>: ..." and one
+log line names it; when states stop coming for `state_timeout` wall seconds while the publisher
+is still there (a paused or hung sim) /mob/state and one log line say so and the law is left
+alone (a paused sim resumes the segment). The first state afterwards re-holds its pose.
+
+Parameters are either applied at run time (flight_mode, bag_mass, bag_size, truth_omega_frame,
+candidates_rate, state_timeout, settle_time) or read-only (state_source and the law's others).
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -23,6 +34,7 @@ from astrobee import msgconv as mc
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from roszen import node_main
+from roszen.parameters import read_only, runtime
 
 from . import mass as mp
 from .law import BagObservation, ControlLaw
@@ -41,7 +53,31 @@ COMMON_PARAMETERS: dict[str, Any] = {
     "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
     "truth_omega_frame": "world",   # frame of loc/truth/twist's angular velocity: world | body
     "candidates_rate": 2.0,         # Hz at most for /gnc/ctl/candidates (0: never)
+    "state_timeout": 1.0,           # wall s without a state before /mob/state reports it stale
 }
+PEER_CHECK_PERIOD = 0.1             # wall s between two looks at the graph and the state's age
+
+
+def size_override(size: Any) -> np.ndarray | None:
+    """A bag_size parameter as the size it sets (three positive metres), None for zeros."""
+    size = list(size)
+    if len(size) != 3 or not all(np.isfinite(s) for s in size):
+        raise ValueError(f"bag_size must be three finite numbers (m), got {size}")
+    return np.asarray(size, float) if all(s > 0 for s in size) else None
+
+
+def _apply_settle_time(law: ControlLaw, value: float) -> None:
+    """settle_time of the law's tracker (the PD law is one; the MPC holds one)."""
+    if not value > 0:
+        raise ValueError(f"settle_time must be > 0 s, got {value:g}")
+    target = getattr(law, "tracker", law)
+    if not hasattr(target, "settle_time"):
+        raise ValueError(f"the {law.name} law has no settle time")
+    target.settle_time = float(value)
+
+
+# law parameters applied at run time (name -> apply(law, value)); the law's others are read-only
+LAW_RUNTIME: dict[str, Callable[[ControlLaw, Any], None]] = {"settle_time": _apply_settle_time}
 
 
 def ekf_state(msg: Any) -> State:
@@ -112,7 +148,9 @@ class ControllerNode:
         self.roszen = roszen
         self.node = n = roszen.Node(node_name, argv=argv)
         self.log = n.get_logger()
-        values = {name: n.declare_parameter(name, default).value
+        self.law: ControlLaw | None = None
+        how = self._parameter_descriptors()
+        values = {name: n.declare_parameter(name, default, how.get(name) or read_only()).value
                   for name, default in {**COMMON_PARAMETERS, **(parameters or {})}.items()}
         self.state_source = str(values["state_source"])
         if self.state_source not in ("ekf", "truth"):
@@ -121,8 +159,10 @@ class ControllerNode:
         if self.truth_omega_frame not in ("world", "body"):
             raise ValueError(f"truth_omega_frame must be world or body, not {self.truth_omega_frame!r}")
         self.bag = CarriedBag(values["bag_mass"], values["bag_size"])
-        rate = float(values["candidates_rate"])
-        self.candidates_period = 1.0 / rate if rate > 0 else float("inf")
+        self._set_candidates_rate(float(values["candidates_rate"]))
+        self.state_timeout = float(values["state_timeout"])
+        if not (np.isfinite(self.state_timeout) and self.state_timeout > 0):
+            raise ValueError(f"state_timeout must be > 0 s, got {self.state_timeout:g}")
         mode = flight_modes.get(str(values["flight_mode"]) or None)
         law_params = {k: values[k] for k in (parameters or {})}
         self.law: ControlLaw = make_law(mode, mp.robot(), law_params)
@@ -133,6 +173,11 @@ class ControllerNode:
         self._last_mob_pub = -1e9
         self._last_candidates = -1e9
         self._carrying = False
+        # peer watch (wall clock): who publishes our state, when the last state came, why lost
+        self.state_topic = n.resolve_topic_name(mc.POSE if self.state_source == "truth" else mc.EKF)
+        self._state_publishers: list[str] = []
+        self._last_state_wall: float | None = None
+        self._lost = ""                 # why states stopped ("" while they come)
 
         M = roszen.message_class
         self.FamCommand, self.ControlState = M("astrobee_msgs/msg/FamCommand"), M("astrobee_msgs/msg/ControlState")
@@ -156,9 +201,73 @@ class ControllerNode:
             n.create_subscription("astrobee_msgs/msg/EkfState", mc.EKF, self._on_ekf, 10)
         self.Trigger = roszen.response_class("std_srvs/srv/Trigger")
         n.create_service("std_srvs/srv/Trigger", mc.CTL_STOP, self._on_stop)
+        n.create_timer(PEER_CHECK_PERIOD, self._watch_peers, clock=roszen.Clock(False))
         self._publish_mob("", force=True)
         self.log.info(f"{self.law.name} controller up: flight mode {self.law.flight_mode.name}, "
                       f"state from {self.state_source}")
+
+    # ---- parameters -------------------------------------------------------------------
+    def _parameter_descriptors(self) -> dict[str, Any]:
+        """How each parameter applied at run time is applied (every other one is read-only)."""
+        def law_param(name: str) -> Any:
+            return runtime(lambda v: LAW_RUNTIME[name](self.law, v), min_value=1e-3
+                           if name == "settle_time" else None)
+
+        def flight_mode(v: str) -> None:
+            self.law.set_flight_mode(flight_modes.get(str(v) or None))
+
+        def omega_frame(v: str) -> None:
+            if v not in ("world", "body"):
+                raise ValueError(f"must be world or body, not {v!r}")
+
+        def set_attr(obj: Callable[[], Any], attr: str, convert: Callable) -> Callable:
+            return lambda v: setattr(obj(), attr, convert(v))
+
+        return {
+            "flight_mode": runtime(flight_mode, validator=lambda v: flight_modes.get(str(v) or None)),
+            "bag_mass": runtime(set_attr(lambda: self.bag, "mass_param", float)),
+            "bag_size": runtime(set_attr(lambda: self.bag, "size_param", size_override),
+                                validator=size_override),
+            "truth_omega_frame": runtime(set_attr(lambda: self, "truth_omega_frame", str),
+                                         validator=omega_frame),
+            "candidates_rate": runtime(self._set_candidates_rate, min_value=0.0),
+            "state_timeout": runtime(set_attr(lambda: self, "state_timeout", float),
+                                     min_value=0.05),
+            **{name: law_param(name) for name in LAW_RUNTIME},
+        }
+
+    def _set_candidates_rate(self, rate: float) -> None:
+        self.candidates_period = 1.0 / rate if rate > 0 else float("inf")
+
+    # ---- peers ------------------------------------------------------------------------
+    def _watch_peers(self) -> None:
+        """Wall-clock check: the state's publishers still in the graph, the last state recent."""
+        pubs = sorted({e.node_fqn for e in self.node.get_publishers_info_by_topic(self.state_topic)
+                       if e.node_fqn != self.node.get_fully_qualified_name()})
+        if pubs:
+            self._state_publishers = pubs
+        if self._last_state_wall is None or self._lost.startswith("lost"):
+            return
+        who = ", ".join(n.lstrip("/") for n in self._state_publishers) or "its publisher"
+        if not pubs:
+            self._lost = f"lost node {who}: no publisher of {self.state_topic}"
+            self.log.error(f"{self._lost}; stopping (holding the last pose)")
+            if self.law.state != mc.MotionState.IDLE and self._last_state is not None:
+                self.law.stop(self._last_state, self._last_stamp or 0.0, self._lost)
+            self._publish_mob(self._lost, force=True, log=False)
+        elif not self._lost and time.monotonic() - self._last_state_wall > self.state_timeout:
+            self._lost = (f"no state on {self.state_topic} from {who} for "
+                          f"{self.state_timeout:g} s (wall): paused or hung?")
+            self.log.warn(self._lost)
+            self._publish_mob(self._lost, force=True, log=False)
+
+    def _state_back(self, state: State) -> None:
+        """The first state after a loss or a stall: say so; after a loss hold its pose."""
+        was, self._lost = self._lost, ""
+        self.log.info(f"state back on {self.state_topic}")
+        if was.startswith("lost"):
+            self.law.rehold(state, f"state back on {self.state_topic}: holding the pose")
+            self._last_segment_key = None
 
     # ---- inputs -----------------------------------------------------------------------
     def _on_scenario(self, msg: Any) -> None:
@@ -269,6 +378,9 @@ class ControllerNode:
             self.log.warn("non-finite state dropped")
             return
         state.orientation = rot.normalize(state.orientation)
+        self._last_state_wall = time.monotonic()
+        if self._lost:
+            self._state_back(state)
         t = mc.stamp_s(stamp)
         last = self._last_state
         if last is not None and self._last_stamp is not None and (
@@ -342,7 +454,7 @@ class ControllerNode:
         arr.markers = out
         self.pub_cand.publish(arr)
 
-    def _publish_mob(self, event: str, force: bool = False) -> None:
+    def _publish_mob(self, event: str, force: bool = False, log: bool = True) -> None:
         t = self._last_stamp if self._last_stamp is not None else 0.0
         if not force and t - self._last_mob_pub < 1.0:
             return
@@ -357,7 +469,7 @@ class ControllerNode:
         if law.segment_result:
             m.fsm_state += f" {law.segment_result}"
         self.pub_mob.publish(m)
-        if event:
+        if event and log:
             self.log.info(f"{m.fsm_state}: {event}")
 
 

@@ -24,9 +24,10 @@ import numpy as np
 from astrobee import flight_modes
 from astrobee import msgconv as mc
 from roszen import node_main
+from roszen.parameters import read_only, runtime
 
 from . import mass as mp
-from .controller_node import CarriedBag, ekf_state
+from .controller_node import CarriedBag, ekf_state, size_override
 from .pd import State
 from .safety import SafetyFilter, box_corners, carried_load
 
@@ -53,14 +54,14 @@ class SafetyFilterNode:
 
         self.node = n = roszen.Node("safety_filter", argv=argv)
         self.log = n.get_logger()
-        values = {k: n.declare_parameter(k, d).value for k, d in PARAMETERS.items()}
+        values = {k: n.declare_parameter(k, d, self._descriptor(k)).value
+                  for k, d in PARAMETERS.items()}
         mode = flight_modes.get(str(values["flight_mode"]) or None)
         margin = float(values["margin"])
         if not (np.isfinite(margin) and 0.0 <= margin < 0.5):
             raise ValueError(f"margin must be in [0, 0.5) m, not {margin}")
         self.bag = CarriedBag(values["bag_mass"], values["bag_size"])
-        rate = float(values["diagnostics_rate"])
-        self.diag_period = 1.0 / rate if rate > 0 else float("inf")
+        self._set_diagnostics_rate(float(values["diagnostics_rate"]))
         self.robot_mass = mp.robot()
         self.filter = SafetyFilter(mode, self.robot_mass, margin=margin)
         self.extent: list = []
@@ -87,6 +88,25 @@ class SafetyFilterNode:
         n.create_subscription("astrobee_msgs/msg/FamCommand", COMMAND_NOMINAL, self._on_command, 10)
         self.log.info(f"safety filter up: flight mode {mode.name}, margin {margin:.2f} m, "
                       f"{len(self.filter.boxes)} candidate boxes")
+
+    # ---- parameters -------------------------------------------------------------------
+    def _descriptor(self, name: str) -> Any:
+        """flight_mode, bag_mass, bag_size and diagnostics_rate are applied at run time; margin
+        is read-only (the candidate boxes are grown by it once, at start)."""
+        if name == "flight_mode":
+            return runtime(lambda v: self.filter.set_flight_mode(flight_modes.get(str(v) or None)),
+                           validator=lambda v: flight_modes.get(str(v) or None))
+        if name == "bag_mass":
+            return runtime(lambda v: setattr(self.bag, "mass_param", float(v)))
+        if name == "bag_size":
+            return runtime(lambda v: setattr(self.bag, "size_param", size_override(v)),
+                           validator=size_override)
+        if name == "diagnostics_rate":
+            return runtime(self._set_diagnostics_rate, min_value=0.0)
+        return read_only()
+
+    def _set_diagnostics_rate(self, rate: float) -> None:
+        self.diag_period = 1.0 / rate if rate > 0 else float("inf")
 
     # ---- inputs -----------------------------------------------------------------------
     def _on_flight_mode(self, msg: Any) -> None:

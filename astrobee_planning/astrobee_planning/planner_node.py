@@ -19,9 +19,10 @@ import numpy as np
 import roszen
 from roszen import Durability, QoSProfile
 
-from astrobee import config
+from astrobee import config, flight_modes
 from astrobee import msgconv as mc
 from roszen import node_main
+from roszen.parameters import runtime
 
 from . import conversions as cv
 from . import local_planner, multi_robot, planner
@@ -32,9 +33,13 @@ class PlannerNode:
     def __init__(self, argv: list[str] | None = None):
         self.node = roszen.Node("planner_node", argv=argv)
         self.log = self.node.get_logger()
-        self.sample_rate = float(self.node.declare_parameter("sample_rate", 10.0).value)
+        # both applied at run time (`param set`): the next request uses the new value
+        self.sample_rate = float(self.node.declare_parameter("sample_rate", 10.0, runtime(
+            lambda v: setattr(self, "sample_rate", float(v)), min_value=1e-3, max_value=1000.0)).value)
         self.default_mode = str(self.node.declare_parameter(
-            "flight_mode", config.astrobee()["default_flight_mode"]).value)
+            "flight_mode", config.astrobee()["default_flight_mode"],
+            runtime(lambda v: setattr(self, "default_mode", str(v)),
+                    validator=lambda v: flight_modes.get(str(v)))).value)
         self.current_mode: str | None = None
         self.ControlState = roszen.message_class("astrobee_msgs/msg/ControlState")
         self.BezierCurve = roszen.message_class("astrobee_msgs/msg/BezierCurve")

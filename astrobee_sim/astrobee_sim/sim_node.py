@@ -94,10 +94,11 @@ def _choice(name: str, value: Any, known: tuple[str, ...]) -> str:
 
 def read_options(node: Any) -> SimOptions:
     """Declare and check every parameter (ParameterError names the first bad one)."""
+    from roszen.parameters import read_only
     d = sim_defaults()
 
-    def par(name: str, default: Any) -> Any:
-        return node.declare_parameter(name, d.get(name, default)).value
+    def par(name: str, default: Any) -> Any:   # all read at start: `param set` is refused
+        return node.declare_parameter(name, d.get(name, default), read_only()).value
 
     backend = _choice("backend", par("backend", "pybullet"), BACKENDS)
     scenario = str(par("scenario", "node2_to_jem"))

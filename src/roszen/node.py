@@ -846,7 +846,10 @@ class Node:
             raise ParameterImmutableException(f"parameter {p.name!r} is read-only")
         cur = self._params[p.name]
         if not desc.dynamic_typing and cur.type_ != ParameterType.NOT_SET and p.type_ != cur.type_:
-            p = Parameter(p.name, value=coerce(p.value, cur.type_))
+            try:
+                p = Parameter(p.name, value=coerce(p.value, cur.type_))
+            except InvalidParameterTypeException as e:
+                raise InvalidParameterTypeException(f"parameter {p.name!r}: {e}") from None
         self._check_range(p, desc)
         return p
 

@@ -117,7 +117,9 @@ def graph(tmp_path):
             ctx = roszen.Context(env=env)
             node = roszen.Node("pd_test", context=ctx)
             nodes.append((node, ctx))
-            return SimWatch(node, procs)
+            watch = SimWatch(node, procs)
+            watch.env = env               # for CLI calls into this graph
+            return watch
         try:
             yield make
         finally:

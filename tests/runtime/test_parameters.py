@@ -198,3 +198,46 @@ def test_wall_clock_timer_runs_while_sim_time_stands_still(router_env):
         assert len(fired_wall) >= 3 and fired_sim == []
     finally:
         node.destroy_node()
+
+
+@pytest.mark.graph
+def test_planner_sample_rate_applied_at_run_time(router_env):
+    """`astrobee param set /planner_node sample_rate 20.0` changes the next plan's sampling
+    (twice the states); NaN, zero and an unknown flight mode are refused with a reason."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    astrobee = str(Path(sys.executable).parent / "astrobee")
+
+    def param_set(name, value):
+        r = subprocess.run([astrobee, "param", "set", "/planner_node", name, value], env=router_env,
+                           capture_output=True, text=True, timeout=60)
+        return r.returncode, (r.stdout + r.stderr).strip()
+
+    planner = spawn(python_cmd("-m", "astrobee_planning.planner_node"), router_env)
+    node = roszen.Node("planner_user")
+    try:
+        cli = node.create_client("astrobee_msgs/srv/PlanGlobal", "/mob/planner/global")
+        assert cli.wait_for_service(timeout_sec=60.0)
+
+        def n_states():
+            req = roszen.request_class("astrobee_msgs/srv/PlanGlobal")()
+            req.start.position.x, req.start.position.z = 10.95, 4.84
+            req.start.orientation.w = req.goal.orientation.w = 1.0
+            req.goal.position.x, req.goal.position.y, req.goal.position.z = 10.93, -1.5, 4.85
+            resp = cli.call(req, timeout_sec=60.0)
+            assert resp.success, resp.message
+            return len(resp.segment)
+
+        before = n_states()
+        for bad in (".nan", "0.0", "-3.0"):
+            rc, out = param_set("sample_rate", bad)
+            assert rc == 1 and "sample_rate" in out, (bad, out)
+        rc, out = param_set("flight_mode", "warp")
+        assert rc == 1 and "warp" in out, out
+        assert param_set("sample_rate", "20.0") == (0, "Set parameter successful")
+        after = n_states()
+        assert abs(after - 2 * before) <= 2, (before, after)
+    finally:
+        node.destroy_node()
+        stop(planner)
