@@ -12,6 +12,7 @@ alpha = vec(2 q_ddot (x) q*). Quaternions are [x, y, z, w]. Body-frame rates: ro
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -80,6 +81,82 @@ def normalised_rates(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     polynomial's value and first two time derivatives, rows of (M, 4) arrays."""
     qn, w, a = normalised_rates_columns(q.T, qd.T, qdd.T)
     return qn.T, w.T, a.T
+
+
+@lru_cache(maxsize=None)
+def _antidiagonal(n1: int, n2: int) -> np.ndarray:
+    """(n1+n2-1, n1*n2) selector E[k, i*n2 + j] = [i + j == k]: coefficients of polynomial
+    products from the outer product of two coefficient vectors."""
+    e = np.zeros((n1 + n2 - 1, n1, n2))
+    for i in range(n1):
+        e[i + np.arange(n2), i, np.arange(n2)] = 1.0
+    e = e.reshape(n1 + n2 - 1, n1 * n2)
+    e.setflags(write=False)
+    return e
+
+
+def time_coefficients_batch(coefficients: np.ndarray, durations: np.ndarray) -> np.ndarray:
+    """`QuaternionPolynomial.time_coefficients` of many pieces at once: (P, 6, 4), (P,) -> (P, 6, 12)."""
+    c = np.asarray(coefficients, dtype=float)
+    T = np.asarray(durations, dtype=float)[:, None, None]
+    k = np.arange(6)[:, None]
+    out = np.zeros(c.shape[:-2] + (6, 12))
+    out[..., :4] = c
+    out[..., :5, 4:8] = k[1:] * c[..., 1:, :] / T
+    out[..., :4, 8:12] = k[2:] * (k[2:] - 1) * c[..., 2:, :] / T ** 2
+    return out
+
+
+def rate_coefficients(time_coefficients: np.ndarray) -> np.ndarray:
+    """Sampling table of quaternion polynomials from their `time_coefficients` (P, 6, 12):
+    (P, 11, 12) monomial coefficients in s of [q (4), |q|^2, q.q', W = vec(q' (x) q*) (3),
+    A = vec(q'' (x) q*) (3)]. For the normalised path q/|q| the world rates are then exactly
+    w = 2 W / |q|^2 and alpha = 2 A / |q|^2 - 4 (q.q') W / |q|^4 (the q (x) q* terms are
+    scalars), so sampling is one matrix product and a few row operations (`rates_from_table`)."""
+    c = np.asarray(time_coefficients, dtype=float)
+    P = c.shape[0]
+    q = c[:, :, :4]
+    # R[p, k, a, b]: coefficient of s^k in (c[:, :, a] * q[:, :, b]), a over [q, q', q''] (12)
+    outer = c[:, :, None, :, None] * q[:, None, :, None, :]                  # (P, 6, 6, 12, 4)
+    R = (_antidiagonal(6, 6) @ outer.reshape(P, 36, 48)).reshape(P, 11, 12, 4)
+    x, y, z, w = 0, 1, 2, 3
+
+    def vec_conj(o: int) -> np.ndarray:     # vec(p (x) q*) with p the 4 columns from o
+        r = lambda a, b: R[:, :, o + a, b]  # noqa: E731
+        return np.stack([r(x, w) - r(w, x) - (r(y, z) - r(z, y)),
+                         r(y, w) - r(w, y) - (r(z, x) - r(x, z)),
+                         r(z, w) - r(w, z) - (r(x, y) - r(y, x))], axis=-1)
+    out = np.zeros((P, 11, 12))
+    out[:, :6, :4] = q
+    out[:, :, 4] = np.einsum("pkaa->pk", R[:, :, 0:4, :])
+    out[:, :, 5] = np.einsum("pkaa->pk", R[:, :, 4:8, :])
+    out[:, :, 6:9] = vec_conj(4)
+    out[:, :, 9:12] = vec_conj(8)
+    return out
+
+
+def rates_from_table(values: np.ndarray, quat: np.ndarray | None = None,
+                     w: np.ndarray | None = None, alpha: np.ndarray | None = None,
+                     scratch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(unit quaternion (4, M), world w (3, M), world alpha (3, M)) from the 12 rows of
+    `rate_coefficients` evaluated at M parameters (column-stacked, (12, M)); written into the
+    given arrays when passed (scratch: (>= 4, M) work rows)."""
+    M = values.shape[1]
+    quat = np.empty((4, M)) if quat is None else quat
+    w = np.empty((3, M)) if w is None else w
+    alpha = np.empty((3, M)) if alpha is None else alpha
+    scratch = np.empty((4, M)) if scratch is None else scratch
+    two_inv_m, r, tmp = scratch[0], scratch[1], scratch[1:4]
+    np.divide(2.0, values[4], out=two_inv_m)                 # 2 / |q|^2
+    np.sqrt(two_inv_m, out=r)
+    np.multiply(values[:4], r, out=quat)
+    quat *= np.sqrt(0.5)                                      # q / |q|
+    np.multiply(values[6:9], two_inv_m, out=w)                # 2 W / |q|^2
+    np.multiply(values[5], two_inv_m, out=r)                  # 2 q.q' / |q|^2
+    np.multiply(values[6:9], r, out=tmp)
+    np.subtract(values[9:12], tmp, out=alpha)
+    alpha *= two_inv_m                                         # (2 A - 4 q.q' W / |q|^2) / |q|^2
+    return quat, w, alpha
 
 
 @dataclass

@@ -2,23 +2,67 @@
 
 Position pieces and attitude pieces have their own time breaks (e.g. a reorientation while the
 position holds). Angular rates are world frame (see quaternion_poly). Sampling is vectorised:
-every piece is turned once into monomial coefficients of its value and time derivatives
-(cached), and sorted sample times are evaluated piece by piece with one matrix product each.
+every piece is turned once into monomial coefficients of its value and time derivatives (for the
+attitude, of the polynomials whose ratios give the normalised quaternion and its world rates;
+cached), and sorted sample times are evaluated in blocks of BLOCK samples (scratch rows reused),
+piece by piece with one matrix product each, straight into one output array.
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import bezier
-from .quaternion_poly import QuaternionPolynomial, normalised_rates_columns
+from .quaternion_poly import (QuaternionPolynomial, rate_coefficients, rates_from_table,
+                              time_coefficients_batch)
 
 
-def _product(c: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """c.T @ V; einsum's own loop for long V (a threaded BLAS call costs 20x more on a busy
-    machine at these thin shapes)."""
-    return c.T @ V if V.shape[1] <= 1024 else np.einsum("jk,jm->km", c, V)
+BLOCK = 3072   # samples evaluated together: the work rows of a block stay in cache, and the
+               # matrix products stay below OpenBLAS's threading size (a threaded call on these
+               # thin shapes costs 20x more on a busy machine)
+_work = threading.local()
+
+
+def _workspace(rows: int) -> np.ndarray:
+    """This thread's (rows, BLOCK) scratch rows, kept between calls (fresh pages cost a page
+    fault each, ~2 us on a VM: more than the arithmetic)."""
+    buf = getattr(_work, "buf", None)
+    if buf is None or buf.shape[0] < rows:
+        buf = _work.buf = np.empty((rows, BLOCK))
+    return buf
+
+
+def _spans(bounds: np.ndarray, b0: int, b1: int):
+    """(piece, lo, hi) of the pieces' sample ranges bounds[k]:bounds[k+1] that meet [b0, b1)."""
+    k = int(np.searchsorted(bounds, b0, side="right")) - 1
+    lo = b0
+    while lo < b1:
+        hi = min(int(bounds[k + 1]), b1)
+        if hi > lo:
+            yield k, lo, hi
+        lo = max(lo, hi)
+        k += 1
+
+
+def _evaluate_block(t: np.ndarray, b0: int, b1: int, bounds: np.ndarray, starts: np.ndarray,
+                    inv_durs: np.ndarray, coef: np.ndarray, s: np.ndarray, V: np.ndarray,
+                    out: np.ndarray) -> None:
+    """out[:, :b1-b0] = the piecewise polynomials at t[b0:b1] (sorted), with s (nb,) and V
+    (powers, nb) as scratch."""
+    nb = b1 - b0
+    spans = list(_spans(bounds, b0, b1))
+    for k, lo, hi in spans:
+        seg = s[lo - b0:hi - b0]
+        np.subtract(t[lo:hi], starts[k], out=seg)
+        np.multiply(seg, inv_durs[k], out=seg)
+    np.clip(s[:nb], 0.0, 1.0, out=s[:nb])
+    V[0, :nb] = 1.0
+    for j in range(1, coef.shape[1]):
+        np.multiply(V[j - 1, :nb], s[:nb], out=V[j, :nb])
+    for k, lo, hi in spans:
+        np.matmul(coef[k].T, V[:, lo - b0:hi - b0], out=out[:, lo - b0:hi - b0])
 
 
 @dataclass
@@ -64,49 +108,38 @@ class Trajectory:
     _cache: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     def _tables(self) -> tuple:
-        """(position starts, durations, coefficients (P, 8, 9)), same for attitude (A, 6, 12);
-        rebuilt when the piece lists change."""
+        """(position starts, durations, coefficients (P, n+1, 9) of [p, v, a]) and the same for
+        the attitude (A, 11, 12): `rate_coefficients` of each piece, signs chained so that each
+        piece starts on the hemisphere where the previous one ended. Rebuilt when the piece
+        lists change."""
         key = (id(self.position), len(self.position), id(self.attitude), len(self.attitude))
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
         n = max(len(p.points) for p in self.position) - 1
+        pd = np.array([p.duration for p in self.position], dtype=float)
         pc = np.zeros((len(self.position), n + 1, 9))
-        for i, p in enumerate(self.position):
-            pts = np.asarray(p.points, dtype=float)
-            m = len(pts) - 1
-            for k in range(3):
-                if k <= m:
+        if all(len(p.points) == n + 1 for p in self.position):
+            pts = np.stack([np.asarray(p.points, dtype=float) for p in self.position])
+            for k in range(min(3, n + 1)):
+                pc[:, :n + 1 - k, 3 * k:3 * k + 3] = (np.einsum("ij,pjd->pid", bezier.monomial_matrix(n, k), pts)
+                                                      / pd[:, None, None] ** k)
+        else:
+            for i, p in enumerate(self.position):
+                pts = np.asarray(p.points, dtype=float)
+                m = len(pts) - 1
+                for k in range(min(3, m + 1)):
                     pc[i, :m + 1 - k, 3 * k:3 * k + 3] = bezier.monomial_matrix(m, k) @ pts / p.duration ** k
-        ac = np.stack([a.time_coefficients() for a in self.attitude])
-        tables = (np.array([p.t0 for p in self.position]), np.array([p.duration for p in self.position]), pc,
-                  np.array([a.t0 for a in self.attitude]), np.array([a.duration for a in self.attitude]), ac)
+        ad = np.array([a.duration for a in self.attitude], dtype=float)
+        tc = time_coefficients_batch(np.stack([a.coefficients for a in self.attitude]), ad)  # (A, 6, 12)
+        if len(tc) > 1:      # q(1) of each piece against q(0) of the next: flip to stay continuous
+            dots = np.einsum("ak,ak->a", tc[:-1, :, :4].sum(axis=1), tc[1:, 0, :4])
+            sign = np.concatenate([[1.0], np.where(np.cumsum(dots < 0) % 2 == 1, -1.0, 1.0)])
+            tc = tc * sign[:, None, None]
+        ac = rate_coefficients(tc)
+        tables = (np.array([p.t0 for p in self.position]), pd, pc,
+                  np.array([a.t0 for a in self.attitude]), ad, ac)
         self._cache = (key, tables)
         return tables
-
-    @staticmethod
-    def _piecewise(t: np.ndarray, starts: np.ndarray, durs: np.ndarray, coef: np.ndarray) -> np.ndarray:
-        """Evaluate the piecewise polynomials at sorted times t, column-stacked: (coef.shape[2], len(t))."""
-        if len(starts) == 1:
-            cuts = np.array([], dtype=int)
-            s = (t - starts[0]) * (1.0 / durs[0])
-        else:
-            cuts = np.searchsorted(t, starts[1:], side="left")
-            idx = np.cumsum(np.bincount(cuts, minlength=len(t) + 1)[:len(t)])
-            s = (t - starts[idx]) / durs[idx]
-        np.clip(s, 0.0, 1.0, out=s)
-        V = np.empty((coef.shape[1], len(t)))
-        V[0] = 1.0
-        for j in range(1, coef.shape[1]):
-            np.multiply(V[j - 1], s, out=V[j])
-        if len(starts) == 1:
-            return _product(coef[0], V)
-        out = np.empty((coef.shape[2], len(t)))
-        lo = 0
-        for k, hi in enumerate(np.append(cuts, len(t))):
-            if hi > lo:
-                out[:, lo:hi] = _product(coef[k], V[:, lo:hi])
-            lo = max(lo, hi)
-        return out
 
     def sample(self, t) -> State:
         """States at times t (seconds from the trajectory start; clipped to [0, duration])."""
@@ -116,14 +149,25 @@ class Trajectory:
             order = np.argsort(t, kind="stable")
             t = t[order]
         ps, pd, pc, as_, ad, ac = self._tables()
-        p = self._piecewise(t, ps, pd, pc)
-        raw = self._piecewise(t, as_, ad, ac)
-        quat, om, al = normalised_rates_columns(raw[:4], raw[4:8], raw[8:])
-        if len(as_) > 1:     # keep the quaternion sign continuous from piece to piece
-            flip = (quat[:, 1:] * quat[:, :-1]).sum(axis=0) < 0
-            if flip.any():
-                quat = quat * np.where(np.concatenate([[0], np.cumsum(flip)]) % 2 == 1, -1.0, 1.0)
-        p, quat, om, al = p.T, quat.T, om.T, al.T
+        M = len(t)
+        out = np.empty((19, M))        # rows: p, v, a (9), quaternion (4), w (3), alpha (3)
+        pb = np.concatenate([[0], np.searchsorted(t, ps[1:], side="left"), [M]])
+        ab = np.concatenate([[0], np.searchsorted(t, as_[1:], side="left"), [M]])
+        npw, napw = pc.shape[1], ac.shape[1]
+        w = _workspace(2 + npw + napw + ac.shape[2] + 3)
+        s, Vp = w[0], w[1:1 + npw]
+        Va = w[1 + npw:1 + npw + napw]
+        tab = w[1 + npw + napw:1 + npw + napw + ac.shape[2]]
+        tmp = w[-4:]
+        ipd, iad = 1.0 / pd, 1.0 / ad
+        for b0 in range(0, M, BLOCK):
+            b1 = min(M, b0 + BLOCK)
+            nb = b1 - b0
+            o = out[:, b0:b1]
+            _evaluate_block(t, b0, b1, pb, ps, ipd, pc, s, Vp, o[:9])
+            _evaluate_block(t, b0, b1, ab, as_, iad, ac, s, Va, tab)
+            rates_from_table(tab[:, :nb], o[9:13], o[13:16], o[16:19], tmp[:, :nb])
+        quat, om, al, p = out[9:13].T, out[13:16].T, out[16:19].T, out[:9].T
         if order is not None:
             inv = np.empty_like(order)
             inv[order] = np.arange(len(order))
