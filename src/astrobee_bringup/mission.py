@@ -1,5 +1,11 @@
-"""The mission client: plan a scenario's route, hand it to the controller, follow it to the end
-and write the run's summary.json and plot.
+"""The mission client: plan a scenario's route, hand it to the controller(s), follow it to the
+end and write the run's summary.json and plot.
+
+One robot: a global plan (/mob/planner/global). Two robots (a scenario whose /sim/scenario lists
+two, holding the cargo bag's two handles): a formation plan (/mob/planner/formation), one
+segment per robot on `<ns>/gnc/ctl/segment`, all with the same start stamp; the leg ends when
+every robot is done, or on a fault of any robot (named in the reason). Per-robot figures and
+the verdict (summary.leg_verdict) go into summary.json's legs[i].robots.
 
     python -m astrobee_bringup.mission --scenario node2_to_jem --run-dir runs/X [--scenario node2_to_jem_bag]
 
@@ -34,6 +40,9 @@ NAMES = mc.MotionState.NAMES
 # After a fault (the sim's propulsion watchdog: the controller is gone) the leg ends once the
 # robot has been watched coasting this long (sim s), or this many wall s (a slow lockstep sim).
 FAULT_WATCH_SIM, FAULT_WATCH_WALL = 0.5, 3.0
+# Formation segments start this far (sim s) after the request: every controller has its
+# segment before the common start stamp, so the robots start together.
+FORMATION_LEAD = 0.5
 
 
 class Interrupted(Exception):
@@ -75,7 +84,8 @@ class LegResult:
     sim_t0: float | None = None
     sim_t1: float | None = None
     wall_t0: float | None = None            # wall clock (s since the epoch) of the flight,
-    wall_t1: float | None = None            # to find the leg in the bag (sim time restarts)
+    wall_t1: float | None = None            # to find the leg in the recording (sim time restarts)
+    robots: list[dict[str, Any]] = field(default_factory=list)   # summary.RobotResult per robot
     plot: str = ""
 
 
@@ -121,62 +131,40 @@ def _quat(q: Any) -> np.ndarray:
     return np.array([q.x, q.y, q.z, q.w], dtype=float)
 
 
-class MissionClient:
-    """The mission's node: subscriptions for state and figures, planner and reset clients."""
+class RobotWatch:
+    """What the mission follows of one robot (namespace `name`, "" = the default robot): its
+    pose, reference and commands (a Series), its /mob/state changes and its /sim/fault."""
 
-    def __init__(self, node: Any, namespace: str = "", stop_flag=None) -> None:
-        import roszen
-        from roszen import Durability, QoSProfile
-
-        self.roszen = roszen
-        self.node = node
-        self.log = node.get_logger()
-        self.ns = namespace.strip("/")
-        pre = f"/{self.ns}/" if self.ns else "/"
-        self.stop_flag = stop_flag or (lambda: False)
-        latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
+    def __init__(self, node: Any, name: str, latched: Any, deep_latched: Any) -> None:
+        pre = mc.ns(name) + "/"
+        self.name = name
+        self.label = sm.robot_label(name)
         self.series = sm.Series()
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
         self.sim_time = float("nan")
         self.mob_state: int | None = None
         self.mob_event = ""
         self.mob_changes: list[tuple[float, int, str]] = []
-        self.faults: list[str] = []
-        self.bag_attached = False
-        self.scenario_info: Any = None      # the sim's latched /sim/scenario (ScenarioInfo)
-        node.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO,
-                                 self._on_scenario, latched)
+        self.faults: list[tuple[float, str]] = []       # (sim time, text) during this flight
+        self.fault_active: tuple[float, str] | None = None
+        self.log = node.get_logger()
         node.create_subscription("geometry_msgs/msg/PoseStamped", pre + sm.POSE, self._on_pose, 10)
         node.create_subscription("astrobee_msgs/msg/FamCommand", pre + sm.COMMAND,
                                  lambda m: self.series.add_command(m), 10)
         node.create_subscription("astrobee_msgs/msg/ControlState", pre + sm.TRAJ,
                                  lambda m: self.series.add_traj(m), 10)
-        node.create_subscription("astrobee_msgs/msg/Contacts", mc.CONTACTS,
-                                 lambda m: self.series.add_contacts(m), 10)
-        node.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
         # every state change counts: a deep queue (a depth-1 queue keeps only the newest of a
         # burst such as STOPPING -> STOPPED on a loaded machine)
         node.create_subscription("astrobee_msgs/msg/MotionState", pre + sm.MOB_STATE,
-                                 self._on_mob, QoSProfile(depth=50, durability=Durability.TRANSIENT_LOCAL))
-        node.create_subscription("astrobee_msgs/msg/Fault", "/sim/fault", self._on_fault, 10)
-        self.seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", pre + "gnc/ctl/segment",
-                                             latched)
-        self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL)
-        self.reset_cli = node.create_client("astrobee_msgs/srv/Reset", mc.SIM_RESET)
-        self.control_cli = node.create_client("astrobee_msgs/srv/SimControl", mc.SIM_CONTROL)
+                                 self._on_mob, deep_latched)
+        node.create_subscription("astrobee_msgs/msg/Fault", pre + mc.FAULT, self._on_fault,
+                                 deep_latched)
+        self.seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", pre + mc.SEGMENT, latched)
 
-    # ---- callbacks ----------------------------------------------------------------------
     def _on_pose(self, msg: Any) -> None:
         self.pose = (_vec(msg.pose.position), _quat(msg.pose.orientation))
         self.sim_time = sm._t(msg.header.stamp)
         self.series.add_pose(msg)
-
-    def _on_scenario(self, msg: Any) -> None:
-        self.scenario_info = msg
-
-    def _on_bag(self, msg: Any) -> None:
-        self.bag_attached = bool(len(msg.attached)) and bool(np.any(np.asarray(msg.attached, bool)))
-        self.series.add_bag(msg)
 
     def _on_mob(self, msg: Any) -> None:
         state = int(msg.state)
@@ -186,19 +174,113 @@ class MissionClient:
 
     def _on_fault(self, msg: Any) -> None:
         if msg.active:
-            text = f"{msg.source}: {msg.message} (code {msg.code})"
-            self.faults.append(text)
-            self.log.warn(f"fault: {text}")
+            fault = (sm._t(msg.header.stamp), f"{msg.source}: {msg.message} (code {msg.code})")
+            self.fault_active = fault
+            self.faults.append(fault)
+            self.log.warn(f"fault of robot {self.label}: {fault[1]}")
+        else:
+            self.fault_active = None
+
+    def start_leg(self) -> int:
+        """Forget the previous leg's figures and faults (an active fault stays); returns the
+        index of the next /mob/state change."""
+        self.series = sm.Series()
+        self.faults = [self.fault_active] if self.fault_active else []
+        return len(self.mob_changes)
+
+    def controlling_since(self, n: int) -> bool:
+        return any(s == CONTROLLING for _, s, _ in self.mob_changes[n:])
+
+    def done_since(self, n: int) -> float | None:
+        """Sim time the robot stopped after controlling (changes from index n), else None."""
+        seen = False
+        for t, s, _ in self.mob_changes[n:]:
+            seen = seen or s == CONTROLLING
+            if seen and s in (STOPPED, IDLE):
+                return t
+        return None
+
+    def position_at(self, t: float) -> list[float] | None:
+        """The recorded position nearest sim time t."""
+        if not self.series.pose_t:
+            return None
+        i = int(np.argmin(np.abs(np.asarray(self.series.pose_t) - t)))
+        return list(self.series.position[i])
+
+
+class MissionClient:
+    """The mission's node: per-robot watches, the cargo bag and contacts, planner and reset
+    clients."""
+
+    def __init__(self, node: Any, namespace: str = "", stop_flag=None) -> None:
+        import roszen
+        from roszen import Durability, QoSProfile
+
+        self.roszen = roszen
+        self.node = node
+        self.log = node.get_logger()
+        self.ns = namespace.strip("/")
+        self.stop_flag = stop_flag or (lambda: False)
+        self.latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
+        self.deep_latched = QoSProfile(depth=50, durability=Durability.TRANSIENT_LOCAL)
+        self.watches: dict[str, RobotWatch] = {}
+        self._goals: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._starts: dict[str, list[float]] = {}
+        self.flying: list[str] = [self.ns]          # the robots of the current leg
+        self.bag_state: Any = None
+        self.scenario_info: Any = None      # the sim's latched /sim/scenario (ScenarioInfo)
+        node.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO,
+                                 self._on_scenario, self.latched)
+        node.create_subscription("astrobee_msgs/msg/Contacts", mc.CONTACTS, self._on_contacts, 10)
+        node.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
+        self.watch(self.ns)
+        self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL)
+        self.formation = node.create_client("astrobee_msgs/srv/PlanFormation", mc.PLANNER_FORMATION)
+        self.reset_cli = node.create_client("astrobee_msgs/srv/Reset", mc.SIM_RESET)
+        self.control_cli = node.create_client("astrobee_msgs/srv/SimControl", mc.SIM_CONTROL)
+
+    def watch(self, name: str) -> RobotWatch:
+        if name not in self.watches:
+            self.watches[name] = RobotWatch(self.node, name, self.latched, self.deep_latched)
+        return self.watches[name]
+
+    @property
+    def series(self) -> sm.Series:
+        """The first robot's series of the current leg (with the contacts and cargo bag)."""
+        return self.watches[self.flying[0]].series
+
+    def leg_series(self) -> dict[str, sm.Series]:
+        return {n: self.watches[n].series for n in self.flying}
+
+    @property
+    def sim_time(self) -> float:
+        return max((self.watches[n].sim_time for n in self.flying
+                    if self.watches[n].sim_time == self.watches[n].sim_time), default=float("nan"))
+
+    # ---- callbacks ----------------------------------------------------------------------
+    def _on_scenario(self, msg: Any) -> None:
+        self.scenario_info = msg
+
+    def _on_contacts(self, msg: Any) -> None:
+        for n in self.flying:
+            self.watches[n].series.add_contacts(msg)
+
+    def _on_bag(self, msg: Any) -> None:
+        self.bag_state = msg
+        for n in self.flying:
+            self.watches[n].series.add_bag(msg)
 
     # ---- waiting ------------------------------------------------------------------------
-    def spin_until(self, cond, wall_timeout: float, what: str, tick=None) -> None:
-        """Spin callbacks until cond() holds; MissionError after wall_timeout s."""
+    def spin_until(self, cond, wall_timeout: float, what, tick=None) -> None:
+        """Spin callbacks until cond() holds; MissionError after wall_timeout s (`what`: text,
+        or a function giving it at the time-out)."""
         deadline = time.monotonic() + wall_timeout
         while not cond():
             if self.stop_flag():
                 raise Interrupted()
             if time.monotonic() > deadline:
-                raise MissionError(f"timed out after {wall_timeout:.0f} s waiting for {what}")
+                raise MissionError(f"timed out after {wall_timeout:.0f} s waiting for "
+                                   f"{what() if callable(what) else what}")
             self.node.spin_once(timeout_sec=0.05)
             if tick:
                 tick()
@@ -216,6 +298,8 @@ class MissionClient:
         """Fly one scenario to its goal; the result says how it went (never raises MissionError)."""
         res = LegResult(scenario=scenario_name)
         wall0 = time.monotonic()
+        self._goals: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._starts: dict[str, list[float]] = {}
         try:
             self._fly(scenario_name, reset, progress, res, wall_timeout, ready_timeout)
         except MissionError as exc:
@@ -231,6 +315,30 @@ class MissionClient:
             self._finish(res)
         return res
 
+    def _reset(self, name: str, ready_timeout: float) -> None:
+        # pause first so that no command of the previous leg (stamped with its late sim
+        # times) is still in flight when the clock restarts, then reset and resume
+        ctl = self.roszen.request_class("astrobee_msgs/srv/SimControl")
+        pause, resume = ctl(), ctl()
+        pause.command, resume.command = mc.SimControl.PAUSE, mc.SimControl.RESUME
+        self.call(self.control_cli, pause, ready_timeout, "/sim/control (pause)")
+        end = time.monotonic() + 0.3
+        self.spin_until(lambda: time.monotonic() > end, 5.0, "in-flight commands")
+        req = self.roszen.request_class("astrobee_msgs/srv/Reset")()
+        req.scenario, req.seed = name, 0
+        resp = self.call(self.reset_cli, req, ready_timeout, "/sim/reset")
+        self.call(self.control_cli, resume, ready_timeout, "/sim/control (resume)")
+        if not resp.success:
+            raise MissionError(f"/sim/reset to {name} failed: {resp.message}")
+        # let the controllers see the jump and hold the new pose before a segment comes
+        ws = [self.watches[n] for n in self.flying]
+        for w in ws:
+            w.pose = None
+        marks = [(len(w.mob_changes), len(w.series.pose_t)) for w in ws]
+        self.spin_until(lambda: all(len(w.mob_changes) > c or len(w.series.pose_t) > p + 60
+                                    for w, (c, p) in zip(ws, marks)), ready_timeout,
+                        "the controller to take the reset")
+
     def _fly(self, name: str, reset: bool, progress: Progress, res: LegResult,
              wall_timeout: float, ready_timeout: float) -> None:
         if not reset and (self.scenario_info is None or self.scenario_info.name != name):
@@ -239,26 +347,7 @@ class MissionClient:
             if self.scenario_info.name != name:
                 reset = True      # the sim runs another scenario: bring it to this one
         if reset:
-            # pause first so that no command of the previous leg (stamped with its late sim
-            # times) is still in flight when the clock restarts, then reset and resume
-            ctl = self.roszen.request_class("astrobee_msgs/srv/SimControl")
-            pause, resume = ctl(), ctl()
-            pause.command, resume.command = mc.SimControl.PAUSE, mc.SimControl.RESUME
-            self.call(self.control_cli, pause, ready_timeout, "/sim/control (pause)")
-            end = time.monotonic() + 0.3
-            self.spin_until(lambda: time.monotonic() > end, 5.0, "in-flight commands")
-            req = self.roszen.request_class("astrobee_msgs/srv/Reset")()
-            req.scenario, req.seed = name, 0
-            resp = self.call(self.reset_cli, req, ready_timeout, "/sim/reset")
-            self.call(self.control_cli, resume, ready_timeout, "/sim/control (resume)")
-            if not resp.success:
-                raise MissionError(f"/sim/reset to {name} failed: {resp.message}")
-            self.pose = None
-            # let the controller see the jump and hold the new pose before a segment comes
-            n_changes, n_poses = len(self.mob_changes), len(self.series.pose_t)
-            self.spin_until(lambda: len(self.mob_changes) > n_changes
-                            or len(self.series.pose_t) > n_poses + 60, ready_timeout,
-                            "the controller to take the reset")
+            self._reset(name, ready_timeout)
         # the scenario as the simulator built it (launch overrides included)
         self.spin_until(lambda: self.scenario_info is not None and self.scenario_info.name == name,
                         ready_timeout, f"the simulator's description of {name} (/sim/scenario)")
@@ -272,18 +361,98 @@ class MissionClient:
         goal_p, goal_q = mc.pose(info.goal)
         goal_q = rot.normalize(goal_q)
         res.goal = [*goal_p.tolist(), *goal_q.tolist()]
-        if self.ns not in list(info.robots):
-            raise MissionError(f"scenario {name} has no robot {self.ns or '(default)'!r}: "
-                               f"robots {list(info.robots)}")
-        start_p, _ = mc.pose(info.starts[list(info.robots).index(self.ns)])
-        progress.update(f"[mission] {name}: waiting for the robot's state and the controller")
-        self.spin_until(lambda: self.pose is not None
-                        and float(np.linalg.norm(self.pose[0] - start_p)) < 0.5
-                        and self.mob_state in (IDLE, STOPPED), ready_timeout,
-                        f"the robot at the start of {name} and the controller ready")
-        pos, q = self.pose
-        res.start = [*pos.tolist(), *q.tolist()]
+        names = list(info.robots)
+        if len(names) == 1 and self.ns and names != [self.ns]:
+            raise MissionError(f"scenario {name} has no robot {self.ns!r}: robots {names}")
+        if not names or len(names) > 2:
+            raise MissionError(f"scenario {name} has {len(names)} robots: the mission flies one "
+                               f"robot, or two carrying a bag in formation")
+        self.flying = names
+        ws = [self.watch(n) for n in names]
+        starts = {n: mc.pose(info.starts[i])[0] for i, n in enumerate(names)}
+        self._goals = {names[0]: (goal_p, goal_q)}
 
+        def not_ready() -> str:
+            late = [w for w in ws if not (w.pose is not None and
+                                          float(np.linalg.norm(w.pose[0] - starts[w.name])) < 0.5
+                                          and w.mob_state in (IDLE, STOPPED))]
+            return ("; ".join(f"robot {w.label}: " + ("no pose" if w.pose is None else
+                              "not at its start" if np.linalg.norm(w.pose[0] - starts[w.name]) >= 0.5
+                              else f"no controller ready ({mc.robot_topic(w.name, sm.MOB_STATE)}: "
+                                   f"{NAMES.get(w.mob_state, w.mob_state)})") for w in late)
+                    if late else "")
+
+        progress.update(f"[mission] {name}: waiting for the robots' states and controllers"
+                        if len(ws) > 1 else f"[mission] {name}: waiting for the robot's state and the controller")
+        self.spin_until(lambda: not not_ready(), ready_timeout,
+                        lambda: f"the robots at the start of {name} and their controllers ready "
+                                f"({not_ready()})")
+        for w in ws:
+            pos, q = w.pose
+            self._starts[w.name] = [*pos.tolist(), *q.tolist()]
+        res.start = self._starts[names[0]]
+        progress.update(f"[mission] {name}: planning")
+        if len(names) == 1:
+            segments, duration = self._plan_one(ws[0], info, fm, goal_p, goal_q, res)
+        else:
+            segments, duration = self._plan_formation(ws, info, fm, goal_p, goal_q, res)
+        res.plan_duration = duration
+
+        marks = {w.name: w.start_leg() for w in ws}
+        t_sent = self.sim_time
+        res.sim_t0 = t_sent
+        wall_sent = time.monotonic()
+        res.wall_t0 = time.time()
+        for w, seg in zip(ws, segments):     # one start stamp for all (formation plans)
+            w.seg_pub.publish(seg)
+        fault_seen: dict[str, float] = {}
+
+        def faulted() -> bool:
+            """A fault arrived during the flight and the robots were watched for a while since."""
+            if not any(w.faults for w in ws):
+                return False
+            if not fault_seen:
+                fault_seen.update(sim=self.sim_time, wall=time.monotonic())
+            return (self.sim_time - fault_seen["sim"] >= FAULT_WATCH_SIM
+                    or time.monotonic() - fault_seen["wall"] >= FAULT_WATCH_WALL)
+
+        def finished() -> bool:
+            return faulted() or all(w.done_since(marks[w.name]) is not None for w in ws)
+
+        def tick() -> None:
+            errs = "  ".join((f"{w.label} " if len(ws) > 1 else "") + "err "
+                             + (f"{w.series.pos_error[-1]:.3f} m" if w.series.pos_error else "-")
+                             for w in ws)
+            c = self.series.robot_clearance[-1] if self.series.robot_clearance else float("nan")
+            el = self.sim_time - t_sent
+            wall = time.monotonic() - wall_sent
+            rtf = el / wall if wall > 0 else float("nan")
+            state = "/".join(NAMES.get(w.mob_state, str(w.mob_state)) for w in ws)
+            progress.update(f"[mission] {name}: {state} t={el:5.1f}/{duration:.1f} s  {errs}  "
+                            f"clear {c:.2f} m  {rtf:4.1f}x real time")
+
+        # A controller that dies before its CONTROLLING state reaches us (its latched state
+        # dies with it) shows up as the sim's watchdog fault: stop waiting then, too.
+        self.spin_until(lambda: all(w.controlling_since(marks[w.name]) for w in ws) or faulted(),
+                        30.0, lambda: "the controllers to accept their segments (" + ", ".join(
+                            f"robot {w.label}" for w in ws if not w.controlling_since(marks[w.name]))
+                        + " did not)", tick)
+        self.spin_until(finished, wall_timeout, "the end of the flight", tick)
+        res.sim_t1, res.wall_t1 = self.sim_time, time.time()
+        res.sim_time = self.sim_time - t_sent
+        if fault_seen:
+            first = min(((w.faults[0][0], w) for w in ws if w.faults), key=lambda x: x[0])[1]
+            raise MissionError(f"flight aborted on a fault of robot {first.label}: {first.faults[0][1]}"
+                               if len(ws) > 1 else f"flight aborted on a fault: {first.faults[0][1]}")
+        t_acc = min(next(t for t, s, _ in w.mob_changes[marks[w.name]:] if s == CONTROLLING)
+                    for w in ws)
+        res.duration = max(w.done_since(marks[w.name]) for w in ws) - t_acc
+        wall = time.monotonic() - wall_sent
+        res.real_time_factor = res.sim_time / wall if wall > 0 else None
+
+    def _plan_one(self, w: RobotWatch, info: Any, fm: Any, goal_p, goal_q, res: LegResult):
+        """PlanGlobal for one robot: ([segment], duration)."""
+        pos, q = w.pose
         req = self.roszen.request_class("astrobee_msgs/srv/PlanGlobal")()
         _set_pose(req.start, pos, q)
         _set_pose(req.goal, goal_p, goal_q)
@@ -292,112 +461,99 @@ class MissionClient:
         # the bag trails along the path: the scenario's margin (bags.yaml's carry_extent default)
         req.carry_extent = float(info.carry_extent) if info.carrying_bag else 0.0
         res.carry_extent = req.carry_extent
-        progress.update(f"[mission] {name}: planning")
-        plan = self.call(self.planner, req, 120.0, "/mob/planner/global")
+        plan = self.call(self.planner, req, 120.0, mc.PLANNER_GLOBAL)
         res.planning_time = float(plan.planning_time)
         if not plan.success:
             raise MissionError(f"planning failed (code {plan.code}): {plan.message}")
-        res.plan_duration = float(plan.duration)
-        self.log.info(f"{name}: plan of {plan.duration:.1f} s in {plan.planning_time:.2f} s, "
+        self.log.info(f"{info.name}: plan of {plan.duration:.1f} s in {plan.planning_time:.2f} s, "
                       f"{len(plan.segment)} states")
-
         seg = self.roszen.message_class("astrobee_msgs/msg/Segment")()
-        now = self.node.get_clock().now()
-        seg.header.stamp = now.to_msg()
+        seg.header.stamp = self.node.get_clock().now().to_msg()
         seg.header.frame_id = "world"
         seg.flight_mode = fm.name
         seg.segment = list(plan.segment)
-        n_changes = len(self.mob_changes)
-        self.series = sm.Series()  # this leg's figures (the subscriptions feed self.series)
-        self.faults = []  # faults during this leg's flight only
-        t_sent = self.sim_time
-        res.sim_t0 = t_sent
-        wall_sent = time.monotonic()
-        res.wall_t0 = time.time()
-        self.seg_pub.publish(seg)
+        return [seg], float(plan.duration)
 
-        def controlling_seen() -> bool:
-            return any(s == CONTROLLING for _, s, _ in self.mob_changes[n_changes:])
-
-        fault_seen: dict[str, float] = {}
-
-        def faulted() -> bool:
-            """A fault arrived during the flight and the robot was watched for a while since."""
-            if not self.faults:
-                return False
-            if not fault_seen:
-                fault_seen.update(sim=self.sim_time, wall=time.monotonic())
-            return (self.sim_time - fault_seen["sim"] >= FAULT_WATCH_SIM
-                    or time.monotonic() - fault_seen["wall"] >= FAULT_WATCH_WALL)
-
-        def finished() -> bool:
-            if faulted():
-                return True
-            seen = False
-            for _, s, _ in self.mob_changes[n_changes:]:
-                seen = seen or s == CONTROLLING
-                if seen and s in (STOPPED, IDLE):
-                    return True
-            return False
-
-        def tick() -> None:
-            e = self.series.pos_error[-1] if self.series.pos_error else float("nan")
-            c = self.series.robot_clearance[-1] if self.series.robot_clearance else float("nan")
-            el = self.sim_time - t_sent
-            wall = time.monotonic() - wall_sent
-            rtf = el / wall if wall > 0 else float("nan")
-            progress.update(f"[mission] {name}: {NAMES.get(self.mob_state, self.mob_state)} "
-                            f"t={el:5.1f}/{plan.duration:.1f} s  err {e:.3f} m  "
-                            f"clear {c:.2f} m  {rtf:4.1f}x real time")
-
-        # A controller that dies before its CONTROLLING state reaches us (its latched state
-        # dies with it) shows up as the sim's watchdog fault: stop waiting then, too.
-        self.spin_until(lambda: controlling_seen() or faulted(), 30.0,
-                        "the controller to accept the segment", tick)
-        self.spin_until(finished, wall_timeout, "the end of the flight", tick)
-        if fault_seen:
-            res.sim_t1, res.wall_t1 = self.sim_time, time.time()
-            res.sim_time = self.sim_time - t_sent
-            if self.pose is not None:
-                res.final_position_error = float(np.linalg.norm(self.pose[0] - goal_p))
-                res.final_attitude_error = rot.angle_between(self.pose[1], goal_q)
-            raise MissionError(f"flight aborted on a fault: {self.faults[0]}")
-        t_end = next(t for t, s, _ in self.mob_changes[n_changes:] if s in (STOPPED, IDLE)
-                     and any(s2 == CONTROLLING for _, s2, _ in self.mob_changes[n_changes:]))
-        res.sim_t1 = self.sim_time
-        res.wall_t1 = time.time()
-        t_acc = next(t for t, s, _ in self.mob_changes[n_changes:] if s == CONTROLLING)
-        res.duration = t_end - t_acc
-        wall = time.monotonic() - wall_sent
-        res.sim_time = self.sim_time - t_sent
-        res.real_time_factor = res.sim_time / wall if wall > 0 else None
-        pos, q = self.pose
-        res.final_position_error = float(np.linalg.norm(pos - goal_p))
-        res.final_attitude_error = rot.angle_between(q, goal_q)
+    def _plan_formation(self, ws: list[RobotWatch], info: Any, fm: Any, goal_p, goal_q,
+                        res: LegResult):
+        """PlanFormation for two robots holding the cargo bag: (one segment per robot, all with
+        the same start stamp a moment ahead, duration)."""
+        req = self.roszen.request_class("astrobee_msgs/srv/PlanFormation")()
+        req.robots = [w.name for w in ws]
+        poses = []
+        for w in ws:
+            m = self.roszen.message_class("geometry_msgs/msg/Pose")()
+            _set_pose(m, *w.pose)
+            poses.append(m)
+        req.starts = poses
+        _set_pose(req.goal, goal_p, goal_q)
+        if info.carrying_bag and self.bag_state is not None:
+            req.has_bag_pose = True
+            req.bag_pose = self.bag_state.pose
+            req.bag_size = info.bag_size
+        req.flight_mode = fm.name
+        t_start = self.sim_time + FORMATION_LEAD
+        mc.set_stamp(req.start_time, t_start)
+        plan = self.call(self.formation, req, 120.0, mc.PLANNER_FORMATION)
+        res.planning_time = float(plan.planning_time)
+        if not plan.success:
+            raise MissionError(f"formation planning failed (code {plan.code}): {plan.message}")
+        self.log.info(f"{info.name}: formation plan of {plan.duration:.1f} s in "
+                      f"{plan.planning_time:.2f} s: {'; '.join(plan.steps)}")
+        for w, seg in zip(ws, plan.segments):
+            end = seg.segment[-1].pose
+            self._goals[w.name] = mc.pose(end)
+        return list(plan.segments), float(plan.duration)
 
     def _finish(self, res: LegResult) -> None:
+        ws = [self.watches[n] for n in self.flying]
         s = self.series
-        res.faults = list(self.faults)
         for k, v in s.tracking().items():
             setattr(res, k, v if v == v else None)
         cl = s.clearance()
         res.min_robot_clearance, res.min_bag_clearance = cl["min_robot_clearance"], cl["min_bag_clearance"]
         res.contacts = cl["contact_samples"]
         res.contact_bodies = sorted(s.contact_bodies)
-        if res.reason == "":
-            problems = []
-            if res.final_position_error is None or res.final_position_error > res.tolerance_position:
-                problems.append(f"final position error {res.final_position_error:.3f} m > "
-                                f"{res.tolerance_position} m")
-            if res.final_attitude_error is None or res.final_attitude_error > res.tolerance_attitude:
-                problems.append(f"final attitude error {res.final_attitude_error:.3f} rad > "
-                                f"{res.tolerance_attitude} rad")
-            if res.contacts:
-                problems.append(f"{res.contacts} contact samples ({', '.join(res.contact_bodies)})")
-            if res.faults:
-                problems.append(f"faults: {'; '.join(res.faults)}")
-            res.success = not problems
-            res.reason = "goal reached" if not problems else "; ".join(problems)
+        robots = []
+        for w in ws:
+            r = sm.RobotResult(name=w.name, start=self._starts.get(w.name, []))
+            goal = self._goals.get(w.name)
+            if goal is not None:
+                r.goal = [*goal[0].tolist(), *rot.normalize(goal[1]).tolist()]
+                if w.pose is not None:
+                    r.final_position_error = float(np.linalg.norm(w.pose[0] - goal[0]))
+                    r.final_attitude_error = float(rot.angle_between(w.pose[1], rot.normalize(goal[1])))
+            for k, v in w.series.tracking().items():
+                setattr(r, k, v if v == v else None)
+            r.min_clearance = w.series.robot_min_clearance()
+            r.contacts = s.contact_samples(sm.contact_name(w.name))
+            r.faults = [text for _, text in w.faults]
+            robots.append(r)
+        aborted = res.reason
+        res.success, res.reason = sm.leg_verdict(robots, res.tolerance_position, res.tolerance_attitude,
+                                                 s.contact_samples("bag"), aborted)
+        for w, r in zip(ws, robots):
+            if r.success:
+                continue
+            if w.faults:
+                t, why = w.faults[0][0], f"fault: {w.faults[0][1]}"
+            elif r.contacts:
+                t, why = s.first_contact(sm.contact_name(w.name)), "touched the station"
+            else:
+                t, why = w.sim_time, r.reason
+            if t is not None and t == t:
+                r.failed_at = {"t": t, "position": w.position_at(t), "why": why}
+        res.robots = [asdict(r) for r in robots]
+        res.faults = [text if len(ws) == 1 else f"robot {w.label}: {text}"
+                      for w in ws for _, text in w.faults]
+        lead = robots[0] if robots else None
+        if lead is not None:
+            errs = [r.final_position_error for r in robots]
+            atts = [r.final_attitude_error for r in robots]
+            res.final_position_error = None if None in errs else max(errs)
+            res.final_attitude_error = None if None in atts else max(atts)
+            rms = [r.rms_position_error for r in robots if r.rms_position_error is not None]
+            res.rms_position_error = max(rms) if rms else None
 
 
 def _set_pose(dst: Any, p: np.ndarray, q: np.ndarray) -> None:
@@ -405,24 +561,31 @@ def _set_pose(dst: Any, p: np.ndarray, q: np.ndarray) -> None:
     dst.orientation.x, dst.orientation.y, dst.orientation.z, dst.orientation.w = (float(v) for v in q)
 
 
-def write_outputs(run_dir: Path, legs: list[LegResult], series: list[sm.Series],
+def write_outputs(run_dir: Path, legs: list[LegResult], series: list[dict[str, sm.Series]],
                   status: str) -> dict[str, Any]:
-    """summary.json and one plot per leg in run_dir."""
+    """summary.json and one plot per leg (every robot of the leg) in run_dir."""
     run_dir.mkdir(parents=True, exist_ok=True)
     boxes = config.keep_in_boxes()
-    for leg, s in zip(legs, series):
-        if s.position:
+    for leg, per in zip(legs, series):
+        if any(s.position for s in per.values()):
             name = "plot.png" if len(legs) == 1 else f"plot_{leg.scenario}.png"
             try:
-                sm.plot(s, run_dir / name, boxes, title=f"{leg.scenario}: {leg.reason}",
-                        start=leg.start[:3] or None, goal=leg.goal[:3] or None)
+                sm.plot(per, run_dir / name, boxes,
+                        title=f"{leg.scenario}: {'SUCCESS' if leg.success else 'FAILED'}: {leg.reason}",
+                        start=leg.start[:3] or None, goal=leg.goal[:3] or None,
+                        robots=leg.robots or None, t0=leg.sim_t0, success=leg.success)
                 leg.plot = name
             except Exception as exc:  # noqa: BLE001 - a plot failure must not lose the summary
                 leg.plot = f"plot failed: {exc}"
-    data = {"success": bool(legs) and all(l.success for l in legs), "status": status,
-            "legs": [asdict(l) for l in legs]}
+    dicts = [asdict(l) for l in legs]
+    ok, reason = sm.run_verdict(dicts)
+    data = {"success": ok, "status": status, "legs": dicts}
     if len(legs) == 1:
-        data.update({k: v for k, v in asdict(legs[0]).items() if k not in data})
+        data.update({k: v for k, v in dicts[0].items() if k not in data})
+    else:
+        data["reason"] = reason
+    data["faults"] = [f"{l.scenario}: {f}" for l in legs for f in l.faults] if len(legs) > 1 \
+        else data.get("faults", [])
     sm.write_json(run_dir / "summary.json", data)
     return data
 
@@ -456,7 +619,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
     client = MissionClient(node, namespace, stop_flag=lambda: stop["flag"])
     progress = Progress(stream)
     legs: list[LegResult] = []
-    all_series: list[sm.Series] = []
+    all_series: list[dict[str, sm.Series]] = []
     status = "completed"
     code = 0
     try:
@@ -466,12 +629,13 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                                  ready_timeout=ready_timeout)
             except Interrupted:
                 legs.append(getattr(client, "interrupted_result", None) or client_last(client, name))
-                all_series.append(client.series)
+                all_series.append(client.leg_series())
                 status, code = "interrupted", 130
                 break
             legs.append(res)
-            all_series.append(client.series)
-            client.series = sm.Series()  # samples after this leg's end belong to no leg
+            all_series.append(client.leg_series())
+            for w in client.watches.values():   # samples after this leg's end belong to no leg
+                w.series = sm.Series()
             progress.done(f"[mission] {name}: {'SUCCESS' if res.success else 'FAILED'}: {res.reason}"
                           + (f" ({res.duration:.1f} s sim, {res.real_time_factor:.1f}x real time)"
                              if res.duration is not None and res.real_time_factor else ""))
@@ -507,7 +671,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", action="append", required=True,
                    help="scenario to fly (repeat for several legs)")
     p.add_argument("--run-dir", default=None, help="output directory (default runs/<time>)")
-    p.add_argument("--namespace", default="", help="robot namespace")
+    p.add_argument("--namespace", default="", help="robot namespace of a one-robot scenario "
+                   "(a scenario's robots come from /sim/scenario)")
     p.add_argument("--timeout", type=float, default=600.0, help="wall seconds per leg")
     a = p.parse_args(own)
     try:

@@ -63,7 +63,7 @@ def test_mission_chain_with_rigid_sim(tmp_path):
 
     from astrobee_bringup.summary import finalize
     assert "SUCCESS" in finalize(run, run / "bag")
-    assert json.loads((run / "summary.json").read_text())["legs"][0]["plot_source"] == "bag"
+    assert json.loads((run / "summary.json").read_text())["legs"][0]["plot_source"] == "recording"
 
     from mcap_ros2.reader import read_ros2_messages
     topics = {}

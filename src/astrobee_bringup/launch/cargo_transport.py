@@ -9,7 +9,10 @@ false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / fligh
 robots (override the scenario: validated here with the scenario before any process starts,
 then built by sim_node, which publishes the result on /sim/scenario for the others),
 mission (true | false: run the mission client, default true), safety (true | false: the CBF
-safety filter node between the controller and the sim, default false), video (true | false:
+safety filter node between the controller and the sim, default false). One controller (and
+safety filter) per robot of the scenario, in the robot's namespace (`bumble/pd_controller_node`
+publishes /bumble/gnc/ctl/command); with a bag held by several robots each controller takes
+its share of the bag's mass. video (true | false:
 render one MP4 per leg into the run folder, default: with demo), demo (true: fly
 node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
@@ -66,12 +69,19 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     if clock not in ("realtime", "fast", "lockstep"):
         raise LaunchError(f"clock must be realtime, fast or lockstep, got '{clock}'")
     overrides = scenario_overrides(ctx)
-    # every leg is built here once, with the overrides, before any process starts
+    # every leg is built here once, with the overrides, before any process starts; each robot
+    # of any leg gets its own controller (and safety filter) in its namespace
+    robots: list[str] = []
+    shares: dict[str, float] = {}       # robot -> its share of a bag carried by several robots
     for leg in legs:
         try:
-            Scenario.load(leg, **overrides)
+            built = Scenario.load(leg, **overrides)
         except ScenarioError as exc:
             raise LaunchError(f"scenario {leg}: {exc}") from None
+        names = list(built.robot_names)
+        robots += [r for r in names if r not in robots]
+        if built.bag is not None and len(names) > 1 and built.bag.handles == len(names):
+            shares.update({r: built.bag.mass / len(names) for r in names})
     ctl_params = write_params_file(ctx.run_dir / "params" / f"{ctl_name}.yaml", ctl_name,
                                    flatten_params(ctl_cfg))
     common = {"scenario": scenario, "use_sim_time": True}
@@ -91,13 +101,19 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         NodeSpec("sim_node", "astrobee_sim", "sim_node",
                  parameters=[sim_params]),
         NodeSpec("planner_node", "astrobee_planning", "planner_node", parameters=[common]),
-        NodeSpec(ctl_name, "astrobee_control", ctl_name,
-                 parameters=[ctl_params, {"use_sim_time": True}], required=not mission,
-                 ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"] if safety else []),
     ]
-    if safety:    # the CBF filter between the controller and the sim
-        nodes.append(NodeSpec("safety_filter_node", "astrobee_control", "safety_filter_node",
-                              parameters=[{"use_sim_time": True}], required=not mission))
+    for robot in robots:     # "" keeps the root namespace; "bumble" -> /bumble/gnc/ctl/command ...
+        per_robot = {"use_sim_time": True}
+        if robot in shares:  # a bag held by several robots: each feeds forward its share
+            per_robot["bag_mass"] = shares[robot]
+        nodes.append(NodeSpec(f"{robot}/{ctl_name}" if robot else ctl_name, "astrobee_control",
+                              ctl_name, parameters=[ctl_params, per_robot], namespace=robot,
+                              required=not mission,
+                              ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"] if safety else []))
+        if safety:    # the CBF filter between the controller and the sim
+            nodes.append(NodeSpec(f"{robot}/safety_filter_node" if robot else "safety_filter_node",
+                                  "astrobee_control", "safety_filter_node", namespace=robot,
+                                  parameters=[{"use_sim_time": True}], required=not mission))
     if ctx.flag("record", True):
         bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
         nodes.append(NodeSpec("recorder", kind="recorder",
