@@ -52,12 +52,16 @@ class PlannerNode:
         self.FormationResp = roszen.response_class("astrobee_msgs/srv/PlanFormation")
         self.Segment = roszen.message_class("astrobee_msgs/msg/Segment")
         latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
-        self.path_pub = self.node.create_publisher("nav_msgs/msg/Path", "/mob/planner/path", latched)
-        self.node.create_subscription("astrobee_msgs/msg/FlightMode", "/mob/flight_mode",
+        # relative names: `-r __ns:=/bumble` moves them as it moves every other node's
+        self.path_pub = self.node.create_publisher("nav_msgs/msg/Path", "mob/planner/path", latched)
+        self.node.create_subscription("astrobee_msgs/msg/FlightMode", "mob/flight_mode",
                                       self._on_flight_mode, latched)
-        self.node.create_service("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL, self._global)
-        self.node.create_service("astrobee_msgs/srv/PlanLocal", mc.PLANNER_LOCAL, self._local)
-        self.node.create_service("astrobee_msgs/srv/PlanFormation", mc.PLANNER_FORMATION, self._formation)
+        self.node.create_service("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL.lstrip("/"),
+                                 self._global)
+        self.node.create_service("astrobee_msgs/srv/PlanLocal", mc.PLANNER_LOCAL.lstrip("/"),
+                                 self._local)
+        self.node.create_service("astrobee_msgs/srv/PlanFormation",
+                                 mc.PLANNER_FORMATION.lstrip("/"), self._formation)
         planner.cached_safe_set(0.0)      # build the safe set before the first request
         self.log.info(f"planner ready (sample rate {self.sample_rate} Hz, "
                       f"default flight mode {self.default_mode})")

@@ -42,6 +42,7 @@ class FemBag(Bag):
                 mass=self.mass, useMassSpring=1, useBendingSprings=1, useNeoHookean=0,
                 springElasticStiffness=float(self.params.get("elastic_stiffness", 50.0)),
                 springDampingStiffness=float(self.params.get("damping", 0.1)),
+                springBendingStiffness=float(self.params.get("bending_stiffness", 0.1)),
                 springDampingAllDirections=1, useSelfCollision=0,
                 frictionCoeff=float(self.params.get("friction", 0.5)),
                 collisionMargin=float(self.params.get("collision_margin", 0.006)),

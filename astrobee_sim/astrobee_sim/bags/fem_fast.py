@@ -48,9 +48,15 @@ class FastFemBag(Bag):
         res = int(resolution or self.params.get("resolution", 400))
         self.mesh = bag_mesh(self.size, self.handles, res, self.handle_length, self.handle_height)
         self.num_nodes = len(self.mesh.nodes)
+        # Bullet's bending springs are left out unless fast_bending_springs (bags.yaml: they
+        # move the bag < 1 mm in Bullet itself and cost ~25% of our step)
+        bending = (float(self.params.get("bending_stiffness", 0.1))
+                   if self.params.get("fast_bending_springs", False) else 0.0)
         self.springs = MassSpring(self.mesh.nodes, self.mesh.tets, self.mass,
                                   float(self.params.get("elastic_stiffness", 50.0)),
-                                  float(self.params.get("damping", 0.1)))
+                                  float(self.params.get("damping", 0.1)), bending,
+                                  str(self.params.get("damping_mode", "spring")),
+                                  int(self.params.get("damping_iterations", 1)))
         if walls is None:
             from ..simulation import sim_defaults, station
             walls = station(float(sim_defaults().get("wall_thickness", 0.25))).walls

@@ -1,12 +1,22 @@
 """Mass-spring model of the bag's tet mesh, integrated semi-implicitly for K copies at once.
 
-The model is Bullet's deformable mass-spring (pybullet `useMassSpring`): one spring per tet edge,
-force k (|d| - L) along the edge, all-direction damping c (v_j - v_i) per edge, equal node
-masses. Bullet integrates it with explicit spring forces and implicit damping, solving the
-damping system every step by conjugate residuals to 1e-8. Here the implicit part is a constant
-matrix, mass + h c Laplacian (+ anchor springs and dampers of the grasped nodes, also implicit),
-factored once with a sparse LU: a step is two sparse products, a few elementwise operations
-and one pre-factored solve, the K copies being 3K right-hand sides of the same solve.
+The model is what pybullet 3.2.7 builds for our VTK soft body (`loadSoftBody(useMassSpring=1)`,
+read in bullet3's PhysicsServerCommandProcessor.cpp and btDeformableMassSpringForce.h): one
+spring per tet edge, force k (|d| - L) along the edge; "bending" springs between nodes two edges
+apart (btSoftBody::generateBendingConstraints(2), stiffness springBendingStiffness, 0.1 N/m by
+default); damping c along each spring only, c ((v_j - v_i) . u) u on every spring, bending ones
+included (for a VTK file pybullet constructs the force with momentum_conserving = true: our
+`springDampingAllDirections=1` is ignored); equal node masses. Bullet evaluates the spring forces
+explicitly at the predicted positions x + h v and the damping implicitly, solving the damping
+system every step by conjugate residuals.
+
+Here the implicit part is split so that its matrix stays constant: M + h c L (L the Laplacian of
+all springs: damping in all directions) plus the grasped nodes' implicit anchor springs and
+dampers, factored once with a sparse LU; the damping across the springs, which Bullet does not
+have, is taken back explicitly, h c B^T (I - u u^T) B v with the velocities of the last
+iterate (`damping_iterations` solves per step, 1 by default). A step is a few sparse products,
+elementwise operations and one pre-factored solve per iteration, the K copies being 3K
+right-hand sides of the same solve.
 
 Arrays: node positions and velocities are (N, K, 3) (node, copy, axis), C-contiguous so that
 reshape(N, 3K) is free. No pybullet here.
@@ -27,6 +37,17 @@ def tet_edges(tets: np.ndarray) -> np.ndarray:
                             ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
     pairs.sort(axis=1)
     return np.unique(pairs, axis=0)
+
+
+def second_neighbour_pairs(edges: np.ndarray, n: int) -> np.ndarray:
+    """(E2, 2) node pairs (i < j) two edges apart and not joined by an edge (Bullet's bending
+    springs, generateBendingConstraints(2))."""
+    a = sp.csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    a = ((a + a.T) > 0).astype(np.int32)
+    two = ((a @ a) > 0).astype(np.int32) - a
+    two = sp.triu(two, k=1).tocoo()
+    keep = two.data > 0
+    return np.stack([two.row[keep], two.col[keep]], axis=1).astype(edges.dtype)
 
 
 class _DenseInverse:
@@ -51,13 +72,26 @@ class Anchors:
 
 
 class MassSpring:
-    """Springs on the tet edges of a mesh with `mass` spread equally over the nodes."""
+    """Springs on the tet edges of a mesh (+ Bullet's bending springs) with `mass` spread
+    equally over the nodes; damping along the springs ("spring", Bullet's) or in all
+    directions ("all", a constant matrix, no explicit correction)."""
 
     def __init__(self, nodes: np.ndarray, tets: np.ndarray, mass: float, stiffness: float,
-                 damping: float):
+                 damping: float, bending_stiffness: float = 0.0, damping_mode: str = "spring",
+                 damping_iterations: int = 1):
+        if damping_mode not in ("spring", "all"):
+            raise ValueError(f"damping_mode must be 'spring' or 'all', got {damping_mode!r}")
         self.rest_nodes = np.asarray(nodes, dtype=float)
         self.n = len(self.rest_nodes)
-        self.edges = tet_edges(tets)
+        edges = tet_edges(tets)
+        self.num_tet_edges = len(edges)
+        if bending_stiffness > 0:     # Bullet generates bending springs only for a stiffness > 0
+            edges = np.concatenate([edges, second_neighbour_pairs(edges, self.n)])
+        self.edges = edges
+        self.edge_stiffness = np.full(len(edges), float(stiffness))
+        self.edge_stiffness[self.num_tet_edges:] = float(bending_stiffness)
+        self.damping_mode = damping_mode
+        self.damping_iterations = max(1, int(damping_iterations))
         i, j = self.edges[:, 0], self.edges[:, 1]
         self.rest = np.linalg.norm(self.rest_nodes[j] - self.rest_nodes[i], axis=1)
         e = len(self.edges)
@@ -73,14 +107,28 @@ class MassSpring:
         self._lu: dict = {}
 
     # ---- forces --------------------------------------------------------------------------
+    def _edge_vectors(self, y: np.ndarray) -> np.ndarray:
+        n, k, _ = y.shape
+        return (self.B @ y.reshape(n, 3 * k)).reshape(-1, k, 3)
+
+    def _to_nodes(self, g: np.ndarray) -> np.ndarray:
+        """(N, K, 3) node forces of per-edge forces g (E, K, 3) acting on each edge's j node."""
+        k = g.shape[1]
+        return -(self.Bt @ g.reshape(-1, 3 * k)).reshape(self.n, k, 3)
+
+    def _spring_edge_forces(self, d: np.ndarray) -> np.ndarray:
+        length = np.sqrt(np.einsum("ekc,ekc->ek", d, d))
+        s = self.edge_stiffness[:, None] * (1.0 - self.rest[:, None] / np.maximum(length, 1e-12))
+        return d * s[:, :, None]
+
     def elastic_forces(self, x: np.ndarray) -> np.ndarray:
         """(N, K, 3) spring forces at positions x (N, K, 3)."""
-        n, k, _ = x.shape
-        d = (self.B @ x.reshape(n, 3 * k)).reshape(-1, k, 3)
-        length = np.sqrt(np.einsum("ekc,ekc->ek", d, d))
-        s = self.stiffness * (1.0 - self.rest[:, None] / np.maximum(length, 1e-12))
-        g = d * s[:, :, None]
-        return -(self.Bt @ g.reshape(-1, 3 * k)).reshape(n, k, 3)
+        return self._to_nodes(self._spring_edge_forces(self._edge_vectors(x)))
+
+    def _cross_damping(self, u: np.ndarray, dv: np.ndarray) -> np.ndarray:
+        """Per-edge c (I - u u^T) dv: the damping across the springs (u unit edge directions)."""
+        along = np.einsum("ekc,ekc->ek", u, dv)
+        return self.damping * (dv - u * along[:, :, None])
 
     # ---- implicit solve ------------------------------------------------------------------
     def solver(self, h: float, anchors: Anchors | None, columns: int = 3):
@@ -115,7 +163,14 @@ class MassSpring:
         target / target_vel: (A, K, 3) where each anchored node is pulled to / moves with.
         external: optional (N, K, 3) extra forces held over the step."""
         n, k, _ = x.shape
-        rhs = self.elastic_forces(x)
+        dx = self._edge_vectors(x)
+        dv = self._edge_vectors(v)
+        g = self._spring_edge_forces(dx + h * dv)          # at the predicted x + h v, as Bullet
+        u = None
+        if self.damping_mode == "spring" and self.damping > 0:
+            u = dx / np.maximum(np.sqrt(np.einsum("ekc,ekc->ek", dx, dx)), 1e-12)[:, :, None]
+            g -= self._cross_damping(u, dv)                 # c (I - uu^T) dv, taken back
+        rhs = self._to_nodes(g)
         if external is not None:
             rhs += external
         rhs *= h
@@ -124,7 +179,14 @@ class MassSpring:
             idx = anchors.nodes
             rhs[idx] += h * (anchors.stiffness[:, None, None] * (target - x[idx])
                              + anchors.damping[:, None, None] * target_vel)
-        v[...] = self.solver(h, anchors, 3 * k).solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
+        lu = self.solver(h, anchors, 3 * k)
+        new = lu.solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
+        if u is not None and self.damping_iterations > 1:
+            base = rhs + h * self._to_nodes(self._cross_damping(u, dv))   # without the correction
+            for _ in range(self.damping_iterations - 1):
+                corr = base - h * self._to_nodes(self._cross_damping(u, self._edge_vectors(new)))
+                new = lu.solve(corr.reshape(n, 3 * k)).reshape(n, k, 3)
+        v[...] = new
         x += h * v
 
     def anchor_forces(self, x: np.ndarray, v: np.ndarray, anchors: Anchors, target: np.ndarray,

@@ -22,6 +22,8 @@ exits, so the bag holds the fault and the coasting robot. Without it, the contro
 """
 from __future__ import annotations
 
+import os
+
 from astrobee.config import load_yaml
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
@@ -29,6 +31,30 @@ from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flat
 
 CONTROLLERS = ("pd", "mpc")
 DEMO_LEGS = ("node2_to_jem", "node2_to_jem_bag")
+
+# the launch arguments, for `astrobee launch cargo_transport --show-args`: name -> (default, what)
+ARGUMENTS = {
+    "scenario": ("node2_to_jem", "config/scenarios/<name>.yaml to fly"),
+    "controller": ("pd", "pd | mpc"),
+    "clock": ("lockstep", "realtime | fast | lockstep (lockstep: the sim waits for each "
+                          "command; realtime with gui)"),
+    "lockstep_timeout": ("", "wall s the sim waits for a tick's command (the sim's default)"),
+    "gui": ("false", "true: open the pybullet window (needs a display)"),
+    "record": ("true", "record every topic into bag_dir"),
+    "bag_dir": ("<run>/bag", "where the recording goes"),
+    "mission": ("true", "run the mission client (its exit ends the launch)"),
+    "safety": ("false", "the CBF safety filter between controller and sim"),
+    "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
+    "demo": ("false", "fly node2_to_jem then node2_to_jem_bag, the sim reset between"),
+    "bag_model": ("", "scenario override: fem | constraint | composite | rigid"),
+    "bag_variant": ("", "scenario override: the cargo bag's variant"),
+    "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
+    "bag_mass": ("", "scenario override: cargo bag mass in kg"),
+    "fem_solver": ("", "scenario override: the FEM bag's solver (e.g. fast)"),
+    "flight_mode": ("", "scenario override: a flight mode (e.g. nominal, quiet)"),
+    "robots": ("", "scenario override: comma-separated robot names (namespaces)"),
+}
+
 
 
 def _number(ctx: LaunchContext, key: str, kind: type, what: str):
@@ -65,6 +91,9 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     if demo:
         scenario = legs[0]
     gui = ctx.flag("gui")
+    if gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise LaunchError("gui:=true needs a display (DISPLAY is not set); run headless and "
+                          "watch the run with `astrobee bag render` instead")
     clock = ctx.arg("clock", "realtime" if gui else "lockstep")
     if clock not in ("realtime", "fast", "lockstep"):
         raise LaunchError(f"clock must be realtime, fast or lockstep, got '{clock}'")
