@@ -41,6 +41,8 @@ def _launch(argv: list[str]) -> int:
     p.add_argument("--gui", action="store_true", help="shorthand for gui:=true (pybullet window)")
     p.add_argument("--scenario", help="shorthand for scenario:=NAME")
     p.add_argument("--list", action="store_true", help="list launch descriptions")
+    p.add_argument("-s", "--show-args", "--show-arguments", dest="show_args", action="store_true",
+                   help="list the launch description's arguments with defaults, then exit")
     p.add_argument("--sigint-timeout", type=float, default=5.0,
                    help="seconds a child gets to exit after SIGINT before SIGTERM (default 5)")
     p.add_argument("--sigterm-timeout", type=float, default=3.0,
@@ -48,12 +50,19 @@ def _launch(argv: list[str]) -> int:
     p.add_argument("--stop-grace", type=float, default=0.75,
                    help="seconds between the nodes' exit and stopping the recorder, so it "
                         "records their last messages (default 0.75)")
-    a = p.parse_args(argv)
+    # launch arguments anywhere on the line, before or after options (as `ros2 launch`)
+    a = p.parse_intermixed_args(argv)
     if a.stop_grace < 0:
         raise CliError(f"--stop-grace must be >= 0, got {a.stop_grace:g}")
     if a.list or not a.name:
         print("\n".join(launcher.list_descriptions()))
         return 0 if a.list else 2
+    if a.show_args:
+        try:
+            print(launcher.format_arguments(a.name), end="")
+        except launcher.LaunchError as exc:
+            raise CliError(str(exc)) from None
+        return 0
     arguments = {}
     for item in a.args:
         key, sep, value = item.partition(":=")
@@ -89,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         except CliError as exc:
             print(f"astrobee launch: {exc}", file=sys.stderr)
             return 1
+        except KeyboardInterrupt:      # Ctrl-C before the launcher took over the signals
+            return 130
     if argv[:2] == ["bag", "render"]:
         from astrobee_bringup import render_bag
         return render_bag.main(argv[2:])

@@ -9,9 +9,12 @@ when a node failed.
 """
 from __future__ import annotations
 
+import collections
 import importlib
 import importlib.util
+import json
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -30,6 +33,8 @@ import yaml
 COLOURS = ["\033[32m", "\033[36m", "\033[33m", "\033[35m", "\033[34m", "\033[91m", "\033[92m"]
 RESET = "\033[0m"
 CLEAN_EXIT = {0, -signal.SIGINT, -signal.SIGTERM, 130, 143}
+_ERROR_WORDS = re.compile(r"error|cannot|failed|exception|not found|invalid|must be", re.I)
+_TS_PREFIX = re.compile(r"^\[(ERROR|FATAL|WARN)\] \[[0-9.]+\] ")
 
 
 class LaunchError(Exception):
@@ -103,6 +108,19 @@ def port_open(port: int, host: str = "127.0.0.1", timeout: float = 0.2) -> bool:
         return False
 
 
+def port_override(override: str, port: int) -> str:
+    """ZENOH_CONFIG_OVERRIDE `override` with its connect/listen endpoints replaced by the
+    router on 127.0.0.1:`port` (an unparsable override is replaced whole)."""
+    from roszen.zconfig import ConfigError, parse_override
+    try:
+        items = parse_override(override)
+    except ConfigError:
+        items = []
+    kept = [f"{k}={v}" for k, v in items
+            if k.strip("/") not in ("connect/endpoints", "listen/endpoints")]
+    return ";".join([*kept, f'connect/endpoints=["tcp/127.0.0.1:{port}"]'])
+
+
 def find_config_dir() -> Path:
     """config/ of the project (ASTROBEE_CONFIG_DIR overrides)."""
     from astrobee.config import config_dir
@@ -111,6 +129,35 @@ def find_config_dir() -> Path:
 
 def load_description(name: str) -> Callable[[LaunchContext], list[NodeSpec]]:
     """The `generate_nodes` function of launch description `name` (module or .py path)."""
+    module = load_module(name)
+    fn = getattr(module, "generate_nodes", None)
+    if fn is None:
+        raise LaunchError(f"launch description '{name}' has no generate_nodes(ctx)")
+    return fn
+
+
+def declared_arguments(name: str) -> dict[str, tuple[str, str]]:
+    """The launch arguments description `name` declares: its module-level
+    `ARGUMENTS = {name: (default, description)}` (empty when it declares none)."""
+    declared = getattr(load_module(name), "ARGUMENTS", None) or {}
+    return {k: (str(v[0]), str(v[1])) if isinstance(v, (tuple, list)) else ("", str(v))
+            for k, v in declared.items()}
+
+
+def format_arguments(name: str) -> str:
+    """`--show-args` text, laid out as `ros2 launch --show-args` does."""
+    declared = declared_arguments(name)
+    if not declared:
+        return f"launch description '{name}' declares no arguments\n"
+    lines = ["Arguments (pass arguments as '<name>:=<value>'):", ""]
+    for key, (default, what) in declared.items():
+        lines += [f"    '{key}':", f"        {what}",
+                  f"        (default: '{default}')" if default else "        (no default)", ""]
+    return "\n".join(lines)
+
+
+def load_module(name: str):
+    """The module of launch description `name` (a module of astrobee_bringup.launch or a .py path)."""
     if name.endswith(".py") and os.path.isfile(name):
         spec = importlib.util.spec_from_file_location(Path(name).stem, name)
         module = importlib.util.module_from_spec(spec)
@@ -123,10 +170,7 @@ def load_description(name: str) -> Callable[[LaunchContext], list[NodeSpec]]:
                 raise
             raise LaunchError(f"no launch description '{name}' "
                               f"(known: {', '.join(list_descriptions()) or 'none'})") from None
-    fn = getattr(module, "generate_nodes", None)
-    if fn is None:
-        raise LaunchError(f"launch description '{name}' has no generate_nodes(ctx)")
-    return fn
+    return module
 
 
 def list_descriptions() -> list[str]:
@@ -188,6 +232,9 @@ class Launcher:
         self._stop = threading.Event()
         self._reason = ""
         self.failed: list[str] = []
+        self._checked = False
+        self.cause = ""        # one line: the first node whose exit failed the launch, and why
+        self._tails: dict[str, collections.deque] = {}
         self._width = max([len(s.name) for s in specs] + [6])
 
     # ---- output -------------------------------------------------------------------------
@@ -207,9 +254,32 @@ class Launcher:
                 pass
 
     def _relay(self, spec: NodeSpec, proc: subprocess.Popen, index: int) -> None:
+        tail = self._tails.setdefault(spec.name, collections.deque(maxlen=30))
         for raw in iter(proc.stdout.readline, b""):
-            self._emit(spec.name, raw.decode("utf-8", "replace").rstrip("\n"), index)
+            line = raw.decode("utf-8", "replace").rstrip("\n")
+            if line.strip():
+                tail.append(line.strip())
+            self._emit(spec.name, line, index)
         proc.stdout.close()
+
+    def why(self, spec: NodeSpec, code: int) -> str:
+        """One line: how `spec` ended (exit code or signal) and the last thing it said about
+        it (its last line naming an error, else its last line)."""
+        if code < 0:
+            try:
+                how = f"killed by {signal.Signals(-code).name}"
+            except ValueError:
+                how = f"killed by signal {-code}"
+        else:
+            how = f"exited with code {code}"
+        t = next((t for t in reversed(self._threads) if t.name == f"relay-{spec.name}"), None)
+        if t is not None:
+            t.join(timeout=1.0)          # its last lines may still be in the pipe
+        lines = list(self._tails.get(spec.name, ()))
+        said = next((ln for ln in reversed(lines) if _ERROR_WORDS.search(ln)),
+                    lines[-1] if lines else "")
+        said = _TS_PREFIX.sub("", said)
+        return f"'{spec.name}' {how}" + (f": {said}" if said else "")
 
     # ---- argv ---------------------------------------------------------------------------
     def argv_for(self, spec: NodeSpec) -> list[str]:
@@ -237,8 +307,9 @@ class Launcher:
 
     def check(self) -> None:
         """Fail before starting anything if a node's executable cannot be found."""
-        if self.use_ros2:
+        if self.use_ros2 or self._checked:
             return
+        self._checked = True
         from roszen.cli.common import CliError
         from roszen.cli.run import resolve
         for spec in self.specs:
@@ -257,8 +328,10 @@ class Launcher:
             # listen endpoint comes from --port
             env.pop("ZENOH_CONFIG_OVERRIDE", None)
         elif not self.use_ros2 and "ZENOH_CONFIG_OVERRIDE" not in spec.env:
-            env.setdefault("ZENOH_CONFIG_OVERRIDE",
-                           f'connect/endpoints=["tcp/127.0.0.1:{self.port}"]')
+            # --port wins: the user's override keeps its other entries, its endpoints are
+            # replaced (else the nodes would silently join another router)
+            env["ZENOH_CONFIG_OVERRIDE"] = port_override(env.get("ZENOH_CONFIG_OVERRIDE", ""),
+                                                         self.port)
         env.update(spec.env)
         return env
 
@@ -269,7 +342,8 @@ class Launcher:
                                 stdin=subprocess.DEVNULL, env=self._env(spec),
                                 start_new_session=True)
         self.procs.append((spec, proc))
-        t = threading.Thread(target=self._relay, args=(spec, proc, index), daemon=True)
+        t = threading.Thread(target=self._relay, args=(spec, proc, index), daemon=True,
+                             name=f"relay-{spec.name}")
         t.start()
         self._threads.append(t)
         cmd = shlex.join(argv)
@@ -311,6 +385,7 @@ class Launcher:
             if p.poll() is None:
                 self.log(f"'{s.name}' ignored SIGINT and SIGTERM: SIGKILL")
                 self.failed.append(s.name)
+                self.cause = self.cause or f"'{s.name}' ignored SIGINT and SIGTERM: killed"
                 _killpg(p, signal.SIGKILL)
                 p.wait()
 
@@ -357,6 +432,8 @@ class Launcher:
                     self.log(f"'{spec.name}' exited with code {code}")
                     if not ok:
                         self.failed.append(spec.name)
+                        if not self.cause and (spec.required or spec.kind == "client"):
+                            self.cause = self.why(spec, code)
                     if spec.required:
                         self.request_stop(f"required node '{spec.name}' exited")
                 if all(p.poll() is not None for _, p in self.procs):
@@ -377,8 +454,60 @@ class Launcher:
                 self.log(f"'{spec.name}' stopped (code {proc.returncode})")
         if self.failed:
             self.log(f"failed: {', '.join(dict.fromkeys(self.failed))}")
+            if not self.cause:
+                spec, proc = next((s, p) for s, p in self.procs if s.name == self.failed[0])
+                self.cause = self.why(spec, proc.returncode)
+            self.log(f"error: {self.cause}")
             status = 1
         return status
+
+
+def _missing_dirs(path: Path) -> list[Path]:
+    """`path` and those of its parents that do not exist yet (deepest first)."""
+    out = []
+    p = Path(path)
+    while not p.exists() and p != p.parent:
+        out.append(p)
+        p = p.parent
+    return out
+
+
+def _remove_created(dirs: list[Path]) -> None:
+    """Remove the run folder a rejected launch created, and the parents it created if empty."""
+    for i, d in enumerate(dirs):
+        if not d.exists():
+            continue
+        if i == 0:
+            shutil.rmtree(d, ignore_errors=True)
+        else:
+            try:
+                d.rmdir()
+            except OSError:
+                break
+
+
+def record_cause(run_dir: Path, cause: str) -> None:
+    """Put the launcher's one-line cause of failure into run_dir/summary.json.
+
+    The mission only sees that it was stopped ("interrupted"); the launcher knows which process
+    died and why. Legs the stop interrupted get the cause as their reason; with no summary (the
+    mission never wrote one) a minimal failed one is written."""
+    from astrobee_bringup.summary import write_json
+    path = run_dir / "summary.json"
+    try:
+        data = json.loads(path.read_text()) if path.exists() else \
+            {"success": False, "status": "failed", "legs": []}
+    except (OSError, ValueError):
+        return
+    data["cause"] = cause
+    if data.get("status") == "interrupted":
+        data["status"] = "failed"
+    for leg in data.get("legs", []):
+        if str(leg.get("reason", "")).startswith("interrupted"):
+            leg["reason"] = f"stopped: {cause}"
+    if len(data.get("legs", [])) == 1 and str(data.get("reason", "")).startswith("interrupted"):
+        data["reason"] = data["legs"][0]["reason"]
+    write_json(path, data)
 
 
 def _killpg(proc: subprocess.Popen, sig: int) -> None:
@@ -399,11 +528,24 @@ def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: P
     ctx = LaunchContext(arguments=arguments, config_dir=find_config_dir(), run_dir=run_dir,
                         use_ros2=use_ros2, port=port)
     generate = load_description(name)
-    specs = generate(ctx)
-    launcher = Launcher(specs, use_ros2=use_ros2, port=port, run_dir=run_dir, registry=registry,
-                        sigint_timeout=sigint_timeout, sigterm_timeout=sigterm_timeout,
-                        stop_grace=stop_grace)
+    declared = declared_arguments(name)
+    unknown = [k for k in arguments if declared and k not in declared]
+    if unknown:
+        raise LaunchError(f"unknown launch argument{'s' if len(unknown) > 1 else ''} "
+                          f"{', '.join(unknown)} (`astrobee launch {name} --show-args` lists them)")
+    created = _missing_dirs(run_dir)
+    try:
+        specs = generate(ctx)
+        launcher = Launcher(specs, use_ros2=use_ros2, port=port, run_dir=run_dir,
+                            registry=registry, sigint_timeout=sigint_timeout,
+                            sigterm_timeout=sigterm_timeout, stop_grace=stop_grace)
+        launcher.check()
+    except BaseException:
+        _remove_created(created)      # a rejected launch leaves no (half-)empty run folder
+        raise
     status = launcher.run()
+    if launcher.cause and run_dir.is_dir():
+        record_cause(run_dir, launcher.cause)
     # optional `post_run(ctx, status)` of the description: runs once every process has stopped
     # (the bag is closed), e.g. the mission's plots read back from the recorded bag
     post_run = getattr(sys.modules.get(generate.__module__), "post_run", None)

@@ -14,6 +14,9 @@ from .zconfig import domain_id as env_domain_id, session_config
 
 
 _all_contexts: "weakref.WeakSet" = weakref.WeakSet()
+# the one wording of "no router" (the context says it once; the CLI verbs do not repeat it)
+NO_ROUTER = ("no Zenoh router reachable (start one with `astrobee router` or "
+             "`ros2 run rmw_zenoh_cpp rmw_zenohd`); continuing: the graph fills in once one is up")
 
 
 class Context:
@@ -52,9 +55,7 @@ class Context:
             except Exception:
                 return False
             if time.monotonic() >= end:
-                Logger("roszen").warn(
-                    "no Zenoh router reachable yet (start one with `python -m roszen.router` or rmw_zenohd); "
-                    "continuing, the graph fills in once it is up")
+                Logger("roszen").warn(NO_ROUTER)
                 return False
             time.sleep(0.01)
 

@@ -11,10 +11,12 @@ import collections
 import queue
 import threading
 import time
+import weakref
 from typing import Optional
 
 
 _pending_interrupts: list = []
+_executors: "weakref.WeakSet" = weakref.WeakSet()
 
 
 def raise_pending() -> None:
@@ -23,6 +25,18 @@ def raise_pending() -> None:
         exc = _pending_interrupts[0]
         _pending_interrupts.clear()
         raise exc
+
+
+def request_interrupt() -> None:
+    """Deliver a KeyboardInterrupt at the next executor step or publish (signal-handler safe).
+
+    For a SIGINT handler: raising KeyboardInterrupt in the handler itself can land inside a
+    zenoh callback running on the main thread, where zenoh swallows it ("callback error") and
+    the node keeps running. Queued here, it is raised on the main thread outside zenoh, and
+    every executor is woken so a blocked spin sees it at once."""
+    _pending_interrupts.append(KeyboardInterrupt())
+    for ex in list(_executors):
+        ex.wake()
 
 
 class Executor:
@@ -35,6 +49,7 @@ class Executor:
         self._nodes: list = []
         self._spin_lock = threading.Lock()
         self._shutdown = False
+        _executors.add(self)
 
     # -- called from zenoh threads ------------------------------------------------------------
     def schedule(self, ent) -> None:

@@ -4,10 +4,9 @@ latched /adder/mode (std_msgs/String); parameters `increment` (int, the count's 
 (string), `gain` (double), `weights` (double array) for `param` verbs."""
 import sys
 
-from roszen import LATCHED, Node, message_class
-
 
 def main() -> int:
+    from roszen import LATCHED, Node, message_class
     node = Node("adder", argv=sys.argv)
     calls = [0]
 
@@ -48,4 +47,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:      # stopped while starting: quietly, as the project's nodes do
+        sys.exit(0)

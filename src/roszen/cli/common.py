@@ -145,10 +145,7 @@ def make_node(prefix: str = "_roszen_cli"):
     except Exception as exc:   # zenoh cannot open the session (router unreachable, bad config)
         raise CliError(f"cannot join the ROS graph: {exc}") from None
     node.context.graph.wait_ready(3.0)
-    session = node.context.session
-    if not list(session.info.routers_zid()) and not list(session.info.peers_zid()):
-        print("[WARN] no Zenoh router reachable (start one with `astrobee router` or "
-              "`ros2 run rmw_zenoh_cpp rmw_zenohd`): the graph looks empty", file=sys.stderr)
+    # no router: the context has said so once (roszen.context.NO_ROUTER), not repeated here
     prime_graph(node)
     return node
 

@@ -31,8 +31,10 @@ class Executable:
         if self.path:
             return [self.path, *args]
         module, _, func = self.target.partition(":")
-        boot = (f"import sys; sys.argv[0] = {self.name!r}; "
-                f"from {module} import {func or 'main'} as _main; sys.exit(_main())")
+        # Ctrl-C while the node's modules still import: exit 130 quietly, no traceback
+        boot = (f"import sys\nsys.argv[0] = {self.name!r}\ntry:\n"
+                f"    from {module} import {func or 'main'} as _main\n"
+                f"except KeyboardInterrupt:\n    sys.exit(130)\nsys.exit(_main())")
         return [sys.executable, "-c", boot, *args]
 
 

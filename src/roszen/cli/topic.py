@@ -190,7 +190,7 @@ def info_cmd(args) -> int:
 def _resolve_topic_type(node, topic: str, given: str | None, timeout: float) -> str:
     from roszen.cli.interface import resolve_type
     if given:
-        return resolve_type(given, "msg")
+        return _check_given_type(node, topic, resolve_type(given, "msg"), timeout)
     types = _wait_types(node, topic, timeout)
     if not types:
         raise CliError(f"Could not determine the type for the passed topic '{topic}' "
@@ -199,6 +199,23 @@ def _resolve_topic_type(node, topic: str, given: str | None, timeout: float) -> 
         raise CliError(f"The passed topic '{topic}' has more than one type: "
                        f"{', '.join(types)}; pass the type explicitly")
     return resolve_type(types[0], "msg")
+
+
+def _check_given_type(node, topic: str, type_name: str, timeout: float) -> str:
+    """An explicit type, checked against the topic's publishers after the discovery wait:
+    published under other types only -> error (nothing would ever arrive); no publisher ->
+    one warning on stderr, then the echo waits for one (as ros2 topic echo does)."""
+    graph = node.context.graph
+    graph.wait_for(lambda: bool(node.get_publishers_info_by_topic(topic)), timeout)
+    pubs = node.get_publishers_info_by_topic(topic)
+    if not pubs:
+        print(f"[WARN] no publisher on '{topic}' yet (waited {timeout:g} s); waiting for one "
+              f"of type {type_name}", file=sys.stderr, flush=True)
+        return type_name
+    theirs = sorted({e.ros_type for e in pubs})
+    if type_name not in theirs:
+        raise CliError(f"'{topic}' is published as {', '.join(theirs)}, not {type_name}")
+    return type_name
 
 
 def adapted_qos(node, topic: str, user=None):
