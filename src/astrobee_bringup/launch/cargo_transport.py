@@ -56,7 +56,6 @@ ARGUMENTS = {
 }
 
 
-
 def _number(ctx: LaunchContext, key: str, kind: type, what: str):
     try:
         return kind(ctx.arg(key))
