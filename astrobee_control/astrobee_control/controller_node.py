@@ -109,7 +109,8 @@ class CarriedBag:
             self.scenario = None
             return
         size = mc.vec(msg.bag_size)
-        if not (np.isfinite(msg.bag_mass) and msg.bag_mass > 0 and np.all(np.isfinite(size))
+        # mass 0: the sim tells no bag mass (realism bag_mass_told 0); the law flies without it
+        if not (np.isfinite(msg.bag_mass) and msg.bag_mass >= 0 and np.all(np.isfinite(size))
                 and np.all(size > 0)):
             raise ValueError(f"bag mass {msg.bag_mass} / size {size.tolist()}")
         self.scenario = (float(msg.bag_mass), size)

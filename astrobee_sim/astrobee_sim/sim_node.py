@@ -10,6 +10,14 @@ Global: /clock, /tf, /sim/bag/state, /sim/bag/mesh (mesh_rate), /sim/contacts, l
 /sim/markers and /sim/scenario (ScenarioInfo: the scenario as built, republished after every
 reset); services /sim/reset, /sim/set_flight_mode, /sim/control.
 
+Realism (astrobee.realism): `realism` (a preset of config/realism.yaml; "" = the scenario's own,
+off unless its YAML has a realism: section) plus `realism.<knob>` overrides of the scalar knobs
+and one disturbance (`realism.disturbance_time` (< 0: drawn from the seed in 0..60 s),
+`_target`, `_force` [x,y,z] or `_magnitude`, `_duration`, `_robot`). <ns>/gnc/ekf then carries
+the noisy estimate (the truth topics stay truth); /sim/scenario's bag_mass is the mass the
+controller is told (bag_mass_true the truth, realism the knobs as YAML); latched /sim/realism
+(std_msgs/String, YAML: knobs, schedule, applied) is republished when a disturbance starts.
+
 Parameters are checked at start: a bad one ends the node with one line naming it (exit 1). A
 bad /sim/reset request (unknown scenario, a path for a name, a negative seed, an invalid
 scenario file) is refused with success false and the running world keeps going untouched.
@@ -34,10 +42,12 @@ from typing import Any
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")    # before numpy: see astrobee_sim/__init__.py
 
 import numpy as np  # noqa: E402
+import yaml  # noqa: E402
 
 from astrobee import config, flight_modes  # noqa: E402
 from astrobee import msgconv as mc  # noqa: E402
 from astrobee import scenario as scn  # noqa: E402
+from astrobee.realism import Disturbance, Realism  # noqa: E402
 from astrobee.scenario import Scenario, ScenarioError  # noqa: E402
 
 from .backend import BACKENDS, SimBackend, make_backend  # noqa: E402
@@ -48,6 +58,11 @@ FAULT_WATCHDOG = 1
 CLOCK_MODES = ("realtime", "fast", "lockstep")
 MAX_CONTROL_STEPS = 100_000     # one /sim/control STEP request (~5 min of sim at 350 Hz)
 MAX_REPLY = 400                 # characters of a refused request echoed in a reply
+SIM_REALISM = "/sim/realism"    # latched std_msgs/String: the realism in effect, pulses applied
+REALISM_SCALARS = ("ekf_position_noise", "ekf_attitude_noise", "ekf_velocity_noise",
+                   "ekf_omega_noise", "ekf_position_bias", "ekf_attitude_bias", "actuation_noise",
+                   "propulsion_lag", "bag_mass_told", "bag_stiffness_scale", "bag_damping_scale")
+DISTURBANCE_PARAMS = ("time", "target", "force", "magnitude", "duration", "robot")
 
 
 class ParameterError(ValueError):
@@ -72,6 +87,21 @@ class SimOptions:
     max_sim_time: float
     gui: bool
     drag: bool
+    realism: str = ""                 # preset name; "" = the scenario's own
+    realism_overrides: tuple = ()     # ((knob, value), ...) given as realism.<knob>
+    disturbance: Disturbance | None = None   # one pulse given by realism.disturbance_*
+
+    def realism_for(self, scenario: Scenario) -> Realism | None:
+        """The realism the node forces on `scenario`, None when no realism parameter was given
+        (each scenario then keeps its own). ScenarioError for a bad combination."""
+        if not self.realism and not self.realism_overrides and self.disturbance is None:
+            return None
+        base = Realism.preset(self.realism) if self.realism else scenario.realism
+        r = Realism.from_dict({**base.to_dict(), **dict(self.realism_overrides)})
+        if self.disturbance is not None:
+            r = Realism.from_dict({**r.to_dict(), "disturbances": [
+                *r.to_dict()["disturbances"], self.disturbance.to_dict()]})
+        return r
 
 
 def _ranged(name: str, value: Any, lo: float, hi: float, lo_open: bool = False) -> float:
@@ -144,13 +174,60 @@ def read_options(node: Any) -> SimOptions:
     max_sim_time = _ranged("max_sim_time", par("max_sim_time", 0.0), 0.0, 1e9)   # 0: no end
     gui = bool(par("gui", False))
     drag = bool(par("drag", False))
+    realism, realism_overrides, disturbance = _read_realism(par)
     overrides = {"bag_model": bag_model or None, "bag_variant": bag_variant or None,
                  "bag_resolution": bag_resolution or None, "bag_mass": bag_mass or None,
                  "fem_solver": fem_solver or None, "robots": robots,
                  "flight_mode": flight_mode or None}
     return SimOptions(backend, scenario, overrides, int(seed), clock_mode, physics_rate,
                       publish_rate, mesh_rate, lockstep_timeout, lockstep_start_timeout,
-                      command_max_lead, max_sim_time, gui, drag)
+                      command_max_lead, max_sim_time, gui, drag, realism, realism_overrides,
+                      disturbance)
+
+
+def _read_realism(par: Any) -> tuple[str, tuple, Disturbance | None]:
+    """The realism parameters, each checked alone so the error names it."""
+    preset = str(par("realism", "") or "").strip()
+    try:
+        if preset:
+            Realism.preset(preset)
+    except ScenarioError as exc:
+        raise ParameterError(f"parameter realism: {exc}") from None
+    overrides = []
+    for knob in REALISM_SCALARS:
+        value = par(f"realism.{knob}", None)          # None: not given (any type accepted)
+        if value is None:
+            continue
+        try:
+            Realism.from_dict({knob: value})
+        except ScenarioError as exc:
+            raise ParameterError(f"parameter realism.{knob}: {exc}") from None
+        overrides.append((knob, float(value)))
+    raw = {k: par(f"realism.disturbance_{k}", None) for k in DISTURBANCE_PARAMS}
+    if isinstance(raw["force"], (list, tuple)) and len(raw["force"]) == 0:
+        raw["force"] = None                             # an empty list: not given
+    if raw["force"] is None and not raw["magnitude"]:
+        given = [k for k, v in raw.items() if v not in (None, "")]
+        if given:
+            raise ParameterError(f"parameter realism.disturbance_{given[0]}: a disturbance needs "
+                                 f"realism.disturbance_force [x, y, z] or realism.disturbance_magnitude")
+        return preset, tuple(overrides), None
+    d: dict[str, Any] = {k: v for k, v in raw.items() if v not in (None, "")}
+    if "time" in d:
+        try:
+            if float(d["time"]) < 0:
+                del d["time"]                          # drawn from the seed in 0..60 s
+        except (TypeError, ValueError):
+            raise ParameterError(f"parameter realism.disturbance_time must be a number (s), "
+                                 f"got {d['time']!r}") from None
+    try:
+        dist = Disturbance.from_dict(d)
+    except ScenarioError as exc:
+        msg = str(exc)
+        key = next((k for k in ("target", "duration", "time", "robot", "force", "magnitude")
+                    if f" {k}" in msg), "force")
+        raise ParameterError(f"parameter realism.disturbance_{key}: {msg}") from None
+    return preset, tuple(overrides), dist
 
 
 def _short(text: str) -> str:
@@ -187,7 +264,8 @@ class SimNode:
             "contacts": "astrobee_msgs/msg/Contacts", "contact": "astrobee_msgs/msg/Contact",
             "markers": "visualization_msgs/msg/MarkerArray", "marker": "visualization_msgs/msg/Marker",
             "mode": "astrobee_msgs/msg/FlightMode", "fault": "astrobee_msgs/msg/Fault",
-            "scenario": "astrobee_msgs/msg/ScenarioInfo", "pose_": "geometry_msgs/msg/Pose"}.items()}
+            "scenario": "astrobee_msgs/msg/ScenarioInfo", "pose_": "geometry_msgs/msg/Pose",
+            "string": "std_msgs/msg/String"}.items()}
         self.pub_clock = n.create_publisher("rosgraph_msgs/msg/Clock", "/clock", roszen.CLOCK)
         self.pub_tf = n.create_publisher("tf2_msgs/msg/TFMessage", "/tf", 10)
         self.pub_bag = n.create_publisher("astrobee_msgs/msg/BagState", mc.BAG_STATE, 10)
@@ -195,6 +273,9 @@ class SimNode:
         self.pub_contacts = n.create_publisher("astrobee_msgs/msg/Contacts", mc.CONTACTS, 10)
         self.pub_markers = n.create_publisher("visualization_msgs/msg/MarkerArray", mc.MARKERS, LATCHED)
         self.pub_scenario = n.create_publisher("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO, LATCHED)
+        self.pub_realism = n.create_publisher("std_msgs/msg/String", SIM_REALISM, LATCHED)
+        self._realism_applied = -1      # pulses in the last /sim/realism
+        self._ekf_state = getattr(backend, "ekf_state", backend.robot_state)
         self.robot_io: dict[str, dict] = {}
         self._make_robot_io()
         n.create_service("astrobee_msgs/srv/Reset", mc.SIM_RESET, self._on_reset)
@@ -212,6 +293,7 @@ class SimNode:
         self.publish_scenario()
         self.publish_modes()
         self.publish_state()
+        self.publish_realism()
         bag = backend.scenario.bag
         self.log.info(f"sim up: scenario {backend.scenario.name}, robots {self.names}, "
                       f"bag {bag.model if bag else 'none'}, backend {opts.backend}, "
@@ -312,6 +394,7 @@ class SimNode:
         self.publish_scenario()
         self.publish_modes()
         self.publish_state()
+        self.publish_realism()
         resp.success, resp.message = True, f"reset to {self.sim.scenario.name} (seed {self.sim.seed})"
         self.log.info(resp.message)
         return resp
@@ -397,6 +480,7 @@ class SimNode:
                 msgs = io["msgs"] = self._robot_msgs(name)
             pos, q, v, w = self.sim.robot_state(name)
             positions.append(pos)
+            noisy = self._ekf_noisy
             ps, tw, ekf, ts = msgs["pose"], msgs["twist"], msgs["ekf"], msgs["tfs"]
             mc.set_stamp_ns(ps.header.stamp, t)      # shared by twist, ekf and tf
             mc.set_pose(ps.pose, pos, q)             # shared by ekf (and its rotation by tf)
@@ -404,6 +488,13 @@ class SimNode:
             mc.set_vec(tw.twist.linear, v)
             mc.set_vec(tw.twist.angular, w)
             io["twist"].publish(tw)
+            if noisy:                                # the estimate, on a pose of its own
+                pos_e, q, v, w = self._ekf_state(name)
+                if ekf.pose is ps.pose:
+                    ekf.pose = self.M["pose_"]()
+                mc.set_pose(ekf.pose, pos_e, q)
+            elif ekf.pose is not ps.pose:
+                ekf.pose = ps.pose
             mc.set_vec(ekf.velocity, v)
             mc.set_vec(ekf.omega, qrot((-q[0], -q[1], -q[2], q[3]), w))      # world -> body
             io["ekf"].publish(ekf)
@@ -460,6 +551,9 @@ class SimNode:
         cs.in_contact = bool(lst)
         cs.robot_clearance, cs.bag_clearance = float(rc), float(bc)
         self.pub_contacts.publish(cs)
+        effects = getattr(self.sim, "effects", None)
+        if effects is not None and len(effects.log) != self._realism_applied:
+            self.publish_realism()
 
     def publish_modes(self) -> None:
         for name in self.names:
@@ -503,12 +597,31 @@ class SimNode:
         if sc.bag is not None:
             m.bag_model, m.bag_variant = sc.bag.model, sc.bag.variant
             m.bag_solver = sc.bag.solver if sc.bag.model == "fem" else ""
-            m.bag_mass = float(sc.bag.mass)
+            told = getattr(self.sim, "told_bag_mass", None)
+            m.bag_mass = float(told() if told is not None else sc.realism.told_mass(sc.bag.mass))
+            m.bag_mass_true = float(sc.bag.mass)
             mc.set_vec(m.bag_size, sc.bag.size)
             m.bag_nodes = int(info.nodes) if info is not None else 0
         m.carry_extent = float(sc.carry_extent)
+        m.realism = yaml.safe_dump(sc.realism.changed(), sort_keys=False)
         m.yaml = sc.to_yaml()
         self.pub_scenario.publish(m)
+
+    @property
+    def _ekf_noisy(self) -> bool:
+        return self.sim.scenario.realism.ekf_noisy
+
+    def publish_realism(self) -> None:
+        """Latched /sim/realism: the knobs in effect, the pulse schedule and the pulses applied
+        (republished by publish_state when a pulse starts)."""
+        sched = getattr(self.sim, "disturbance_schedule", None)
+        applied = list(getattr(self.sim, "disturbance_log", []))
+        m = self.M["string"]()
+        m.data = yaml.safe_dump({"knobs": self.sim.scenario.realism.changed(),
+                                 "schedule": sched() if sched is not None else [],
+                                 "applied": applied}, sort_keys=False)
+        self.pub_realism.publish(m)
+        self._realism_applied = len(applied)
 
     def publish_markers(self) -> None:
         from .world import module_colour
@@ -628,8 +741,20 @@ def build(argv: list[str]) -> SimNode:
         except ScenarioError as exc:
             raise ParameterError(f"parameter scenario: {exc}") from None
         sc = base.override(**given)      # its ScenarioError names the override (robots, ...)
+        kw = dict(opts.overrides)
+        try:
+            realism = opts.realism_for(sc)
+        except ScenarioError as exc:
+            raise ParameterError(f"parameter realism: {exc}") from None
+        if realism is not None:
+            sc = sc.override(realism=realism)
+            if opts.backend == "pybullet":
+                kw["realism"] = realism          # kept over /sim/reset by name
+        if sc.realism.physical and opts.backend != "pybullet":
+            raise ParameterError(f"parameter realism: backend {opts.backend} models no realism "
+                                 f"but bag_mass_told; use backend:=pybullet")
         backend = make_backend(opts.backend, sc, opts.seed, physics_rate=opts.physics_rate,
-                               gui=opts.gui, drag=opts.drag, **opts.overrides)
+                               gui=opts.gui, drag=opts.drag, **kw)
         return SimNode(node, backend, opts)
     except BaseException:
         if backend is not None:

@@ -6,15 +6,24 @@ clock (realtime | fast | lockstep; default lockstep headless: the sim waits for 
 command, as fast as the graph answers; realtime with gui), lockstep_timeout (wall s the sim
 waits for a tick's command before stepping on; the sim's default when unset), gui (true |
 false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / flight_mode /
-robots (override the scenario: validated here with the scenario before any process starts,
-then built by sim_node, which publishes the result on /sim/scenario for the others),
-mission (true | false: run the mission client, default true), safety (true | false: the CBF
-safety filter node between the controller and the sim, default false). One controller (and
+robots / realism (a preset of config/realism.yaml) (override the scenario: validated here
+with the scenario before any process starts, then built by sim_node, which publishes the
+result on /sim/scenario for the others), mission (true | false: run the mission client,
+default true), safety (true | false: the CBF safety filter node between the controller and
+the sim, default false). One controller (and
 safety filter) per robot of the scenario, in the robot's namespace (`bumble/pd_controller_node`
 publishes /bumble/gnc/ctl/command); with a bag held by several robots each controller takes
 its share of the bag's mass. video (true | false:
-render one MP4 per leg into the run folder, default: with demo), demo (true: fly
-node2_to_jem then node2_to_jem_bag in the same graph, the sim reset between the legs).
+render one MP4 per leg into the run folder, default: with demo), demo (true: fly DEMO_LEGS
+in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag (the FEM
+bag, fast solver) with PD, then node2_to_jem_fem_bag_mpc: the FEM bag flown by the sampling MPC).
+
+Controllers: each robot gets the controller its scenario names (`controller:` in the scenario
+file, pd when it names none; an explicit controller:= argument applies to every robot). A
+per-robot controller, rather than a second graph run or a switch inside one controller node,
+keeps the demo one graph, one recording, one summary.json: the MPC leg's robot (queen) has its
+own mpc_controller_node in /queen, while the PD node of the default robot waits on topics no
+sim publishes during that leg, as every Astrobee runs its own controller.
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 With the mission running, the controller's death does not end the launch by itself: the sim's
 watchdog stops the robot and raises a fault, the mission ends the leg on it (failed) and
@@ -30,12 +39,12 @@ from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flat
 
 
 CONTROLLERS = ("pd", "mpc")
-DEMO_LEGS = ("node2_to_jem", "node2_to_jem_bag")
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
 
 # the launch arguments, for `astrobee launch cargo_transport --show-args`: name -> (default, what)
 ARGUMENTS = {
     "scenario": ("node2_to_jem", "config/scenarios/<name>.yaml to fly"),
-    "controller": ("pd", "pd | mpc"),
+    "controller": ("", "pd | mpc for every robot ('': each scenario's `controller:`, else pd)"),
     "clock": ("lockstep", "realtime | fast | lockstep (lockstep: the sim waits for each "
                           "command; realtime with gui)"),
     "lockstep_timeout": ("", "wall s the sim waits for a tick's command (the sim's default)"),
@@ -45,7 +54,7 @@ ARGUMENTS = {
     "mission": ("true", "run the mission client (its exit ends the launch)"),
     "safety": ("false", "the CBF safety filter between controller and sim"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
-    "demo": ("false", "fly node2_to_jem then node2_to_jem_bag, the sim reset between"),
+    "demo": ("false", "fly DEMO_LEGS (no bag, FEM bag with PD, FEM bag with MPC), the sim reset between"),
     "bag_model": ("", "scenario override: fem | constraint | composite | rigid"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
@@ -53,6 +62,8 @@ ARGUMENTS = {
     "fem_solver": ("", "scenario override: the FEM bag's solver (e.g. fast)"),
     "flight_mode": ("", "scenario override: a flight mode (e.g. nominal, quiet)"),
     "robots": ("", "scenario override: comma-separated robot names (namespaces)"),
+    "realism": ("", "realism preset of config/realism.yaml (off, astrobee, harsh; '' = the "
+                "scenario's): EKF noise, actuation noise + lag, bumps, told bag mass"),
 }
 
 
@@ -66,7 +77,7 @@ def _number(ctx: LaunchContext, key: str, kind: type, what: str):
 def scenario_overrides(ctx: LaunchContext) -> dict:
     """Launch arguments that change the scenario (validated by Scenario.override)."""
     out: dict = {}
-    for key in ("bag_model", "bag_variant", "fem_solver", "flight_mode"):
+    for key in ("bag_model", "bag_variant", "fem_solver", "flight_mode", "realism"):
         if ctx.arg(key):
             out[key] = ctx.arg(key)
     if ctx.arg("bag_resolution"):
@@ -80,11 +91,9 @@ def scenario_overrides(ctx: LaunchContext) -> dict:
 
 def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     scenario = ctx.arg("scenario", "node2_to_jem")
-    controller = ctx.arg("controller", "pd")
-    if controller not in CONTROLLERS:
+    controller = ctx.arg("controller", "")      # '' : each scenario's own (pd if it names none)
+    if controller and controller not in CONTROLLERS:
         raise LaunchError(f"controller must be {' or '.join(CONTROLLERS)}, got '{controller}'")
-    ctl_cfg = load_yaml(ctx.config_dir / "controllers.yaml").get(controller, {})
-    ctl_name = f"{controller}_controller_node"
     demo = ctx.flag("demo")
     legs = list(DEMO_LEGS) if demo else [scenario]
     if demo:
@@ -101,6 +110,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     # of any leg gets its own controller (and safety filter) in its namespace
     robots: list[str] = []
     shares: dict[str, float] = {}       # robot -> its share of a bag carried by several robots
+    kinds: dict[str, str] = {}          # robot -> its controller (pd | mpc)
     for leg in legs:
         try:
             built = Scenario.load(leg, **overrides)
@@ -108,10 +118,21 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
             raise LaunchError(f"scenario {leg}: {exc}") from None
         names = list(built.robot_names)
         robots += [r for r in names if r not in robots]
+        kind = controller or str(built.extra.get("controller") or "pd")
+        if kind not in CONTROLLERS:
+            raise LaunchError(f"scenario {leg}: controller must be {' or '.join(CONTROLLERS)}, got '{kind}'")
+        for r in names:
+            if kinds.setdefault(r, kind) != kind:
+                raise LaunchError(f"robot {r or '(default)'} flies with {kinds[r]} in one leg and "
+                                  f"{kind} in {leg}: one controller per robot")
         if built.bag is not None and len(names) > 1 and built.bag.handles == len(names):
             shares.update({r: built.bag.mass / len(names) for r in names})
-    ctl_params = write_params_file(ctx.run_dir / "params" / f"{ctl_name}.yaml", ctl_name,
-                                   flatten_params(ctl_cfg))
+    ctl_params = {}                     # controller kind -> its parameters file
+    for kind in sorted(set(kinds.values())):
+        name = f"{kind}_controller_node"
+        ctl_params[kind] = write_params_file(
+            ctx.run_dir / "params" / f"{name}.yaml", name,
+            flatten_params(load_yaml(ctx.config_dir / "controllers.yaml").get(kind, {})))
     common = {"scenario": scenario, "use_sim_time": True}
     sim_params = {**common, "clock_mode": clock, "gui": gui}
     if ctx.arg("lockstep_timeout"):
@@ -134,8 +155,9 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         per_robot = {"use_sim_time": True}
         if robot in shares:  # a bag held by several robots: each feeds forward its share
             per_robot["bag_mass"] = shares[robot]
+        ctl_name = f"{kinds[robot]}_controller_node"
         nodes.append(NodeSpec(f"{robot}/{ctl_name}" if robot else ctl_name, "astrobee_control",
-                              ctl_name, parameters=[ctl_params, per_robot], namespace=robot,
+                              ctl_name, parameters=[ctl_params[kinds[robot]], per_robot], namespace=robot,
                               required=not mission,
                               ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"] if safety else []))
         if safety:    # the CBF filter between the controller and the sim
