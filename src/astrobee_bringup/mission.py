@@ -87,6 +87,8 @@ class LegResult:
     wall_t1: float | None = None            # to find the leg in the recording (sim time restarts)
     robots: list[dict[str, Any]] = field(default_factory=list)   # summary.RobotResult per robot
     plot: str = ""
+    realism: dict[str, Any] = field(default_factory=dict)      # knobs on (sim's /sim/realism)
+    disturbances: list[dict[str, Any]] = field(default_factory=list)   # pulses applied
 
 
 class Progress:
@@ -232,6 +234,8 @@ class MissionClient:
         node.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO,
                                  self._on_scenario, self.latched)
         node.create_subscription("astrobee_msgs/msg/Contacts", mc.CONTACTS, self._on_contacts, 10)
+        self.realism: dict = {}
+        node.create_subscription("std_msgs/msg/String", "/sim/realism", self._on_realism, self.latched)
         node.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
         self.watch(self.ns)
         self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL)
@@ -260,6 +264,15 @@ class MissionClient:
     # ---- callbacks ----------------------------------------------------------------------
     def _on_scenario(self, msg: Any) -> None:
         self.scenario_info = msg
+
+    def _on_realism(self, msg: Any) -> None:
+        """/sim/realism (YAML: knobs, schedule, applied), recorded with each leg."""
+        import yaml
+        try:
+            data = yaml.safe_load(msg.data)
+            self.realism = data if isinstance(data, dict) else {}
+        except yaml.YAMLError:
+            self.log.warn("malformed /sim/realism dropped")
 
     def _on_contacts(self, msg: Any) -> None:
         for n in self.flying:
@@ -544,6 +557,8 @@ class MissionClient:
             if t is not None and t == t:
                 r.failed_at = {"t": t, "position": w.position_at(t), "why": why}
         res.robots = [asdict(r) for r in robots]
+        res.realism = dict(self.realism.get("knobs") or {})
+        res.disturbances = list(self.realism.get("applied") or [])
         res.faults = [text if len(ws) == 1 else f"robot {w.label}: {text}"
                       for w in ws for _, text in w.faults]
         lead = robots[0] if robots else None
