@@ -289,14 +289,18 @@ def test_sim_node_tells_the_controller_the_wrong_mass_and_publishes_the_realism(
 
 
 @pytest.mark.graph
-@pytest.mark.parametrize("param,needle", [
-    ("realism:=calm", "unknown realism preset 'calm'"),
-    ("realism.ekf_position_noise:=-1", "realism.ekf_position_noise"),
-    ("realism.disturbance_target:=wall", "realism.disturbance_target"),
+@pytest.mark.parametrize("params,needle", [
+    (["realism:=calm"], "unknown realism preset 'calm'"),
+    (["realism.ekf_position_noise:=-1"], "realism.ekf_position_noise"),
+    (["realism.disturbance_target:=wall"], "realism.disturbance_target"),
+    (["realism.disturbance_duration:=1.0"], "needs realism.disturbance_force"),
+    (["backend:=rigid", "realism:=astrobee"], "backend rigid models no realism"),
 ])
-def test_bad_realism_parameter_ends_sim_node_with_one_line(param, needle):
+def test_bad_realism_parameter_ends_sim_node_with_one_line(params, needle):
     from roszen import testing
-    args = ["-m", "astrobee_sim.sim_node", "--ros-args", "-p", param]
+    args = ["-m", "astrobee_sim.sim_node", "--ros-args"]
+    for p in params:
+        args += ["-p", p]
     r = subprocess.run(testing.python_cmd(*args), env=testing.zenoh_env(testing.free_port()),
                        capture_output=True, text=True, timeout=60)
     lines = [ln for ln in r.stderr.splitlines() if ln.startswith("sim_node: error:")]
