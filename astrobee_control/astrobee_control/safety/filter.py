@@ -12,12 +12,18 @@ the robot point (a carried load):
     a_pt (body) = F/m + alpha x e + w x (w x e),  alpha = I^-1 (tau - c x F - w x I w),
     e = point offset - c (from the centre of mass c).
 
+The angular rate has a barrier of its own (relative degree one, torque -> angular
+acceleration): h_w = w_max^2 - |w|^2 >= 0 with w_max the flight mode's hard_limit_omega, asked
+as h_w_dot + k_w h_w >= 0, i.e. -2 w . alpha(F, tau) + k_w h_w >= 0 (one row, linear in the
+wrench). The carried bag is modelled as rigidly held, so its swing has no barrier of its own.
+
 The QP (variables F, tau in the body frame and one slack s >= 0 shared by all barrier rows,
-in units of the braking deceleration):
+in units of the braking deceleration, or of the angular one for the rate row):
 
     min  sum_i ((F_i - F_nom,i) / Fmax_i)^2 + sum_i ((tau_i - tau_nom,i) / taumax_i)^2
          + rho2 s^2 + rho1 s
     s.t. (n_b . a_pt(F, tau) - required_accel) / a_brake + s >= 0  (per face of each point's box)
+         (-2 w . alpha(F, tau) + k_w h_w) / (2 w_max alpha_brake) + s >= 0   (angular rate)
          |F_i| <= Fmax_i, |tau_i| <= taumax_i                (flight mode's propulsion limits)
 
 is set up in OSQP once (dense 7-column constraint pattern sized for `max_points` points) and
@@ -103,7 +109,7 @@ class SafetyFilter:
                  com_offset: np.ndarray | None = None, boxes: np.ndarray | None = None,
                  margin: float = 0.05, robot_radius: float | None = None,
                  brake_fraction: float = 0.5, k1: float = 1.0, k2: float = 1.0,
-                 slack_tol: float = 0.05, max_points: int = 9) -> None:
+                 k_omega: float = 5.0, slack_tol: float = 0.05, max_points: int = 9) -> None:
         """flight_mode: force/torque limits. mass: mass and inertia about the centre of mass,
         which sits at `com_offset` (body frame) from the robot point (default: at it).
         boxes: candidate boxes (default: the station's keep-in boxes grown by `margin` and
@@ -112,14 +118,17 @@ class SafetyFilter:
         outside them, so 0.05 keeps >= 5 cm to the walls while leaving the planner's whole
         safe set free). brake_fraction: share of the weakest axis's force used as the braking
         deceleration of the barriers (<= 1/sqrt(3) keeps a corner's three faces feasible
-        together). k1, k2 (1/s): barrier slopes at a face. slack_tol: slack (in braking
-        decelerations) above which the hard QP counts as infeasible."""
+        together). k1, k2 (1/s): barrier slopes at a face. k_omega (1/s): slope of the angular
+        rate barrier (|w| <= the flight mode's hard_limit_omega; none when that is 0).
+        slack_tol: slack (in braking decelerations) above which the hard QP counts as
+        infeasible."""
         self.robot = geometry.robot_sphere(robot_radius)
         self.margin = float(margin)
         self.boxes = (geometry.corridor_boxes(margin=self.margin) if boxes is None
                       else np.array(boxes, dtype=float, ndmin=2))
         self.brake_fraction = float(brake_fraction)
         self.k1, self.k2 = float(k1), float(k2)
+        self.k_omega = float(k_omega)
         self.slack_tol = float(slack_tol)
         self._prev_box: dict[int, int] = {}
         self._solver: osqp.OSQP | None = None
@@ -152,13 +161,17 @@ class SafetyFilter:
         # unit-diagonal cost, barrier rows in braking decelerations (OSQP converges in tens of
         # iterations on this scaling instead of hundreds in SI units)
         self._scale = np.concatenate([np.maximum(self.f_max, 1e-6), np.maximum(self.t_max, 1e-6)])
+        # angular rate limit and the angular deceleration that scales its barrier row
+        self.omega_max = float(self.flight_mode.hard_limit_omega) if enabled else 0.0
+        self.alpha_brake = (self.brake_fraction * float(self.t_max.min())
+                            / float(np.linalg.eigvalsh(self.inertia).max()) if enabled else 0.0)
         self._p_diag = np.array([2.0] * 6 + [2.0 * SLACK_QUAD])
 
     # ---- the QP --------------------------------------------------------------------------------
     def _setup(self, n_points: int) -> None:
         """Build the OSQP problem for up to n_points envelope points (once, or on growth)."""
         self._max_points = max(self._max_points, n_points)
-        m = 6 + 1 + 6 * self._max_points
+        m = 6 + 1 + 1 + 6 * self._max_points      # bounds, slack >= 0, rate row, face rows
         self._m = m
         a = np.zeros((m, N_VAR))
         a[:7, :7] = np.eye(7)
@@ -238,12 +251,13 @@ class SafetyFilter:
         rows_f = np.einsum("fi,pij->pfj", normals, af)                     # (P, 6, 3)
         rows_t = np.einsum("fi,pij->pfj", normals, at)
         lower = need - np.einsum("fi,pi->pf", normals, c)                  # (P, 6)
+        w_row_f, w_row_t, w_lower = self._rate_row(w, gyro)
 
         # transparent when the (clipped) nominal wrench meets every barrier row
         f_c = np.clip(f_nom, -self.f_max, self.f_max)
         t_c = np.clip(t_nom, -self.t_max, self.t_max)
         lhs = rows_f @ f_c + rows_t @ t_c
-        if np.all(lhs >= lower):
+        if np.all(lhs >= lower) and w_row_f @ f_c + w_row_t @ t_c >= w_lower:
             return SafetyResult(f_c, t_c, False, True, False,
                                 float(np.linalg.norm(np.r_[f_c - f_nom, t_c - t_nom])), 0.0,
                                 h, h1, sel)
@@ -254,20 +268,29 @@ class SafetyFilter:
         ab = max(self.a_brake, 1e-9)
         inv_ab = 1.0 / ab
         sc = self._scale
-        a[7:7 + nr, 0:3] = rows_f.reshape(nr, 3) * (sc[:3] * inv_ab)
-        a[7:7 + nr, 3:6] = rows_t.reshape(nr, 3) * (sc[3:] * inv_ab)
-        a[7:7 + nr, 6] = 1.0
-        a[7 + nr:, :] = 0.0
         lo, up = self._l, self._u
+        w_scale = 2.0 * self.omega_max * self.alpha_brake
+        if w_scale > 0:
+            a[7, 0:3] = w_row_f * sc[:3] / w_scale
+            a[7, 3:6] = w_row_t * sc[3:] / w_scale
+            a[7, 6] = 1.0
+            lo[7] = w_lower / w_scale
+        else:
+            a[7, :] = 0.0
+            lo[7] = -INF
+        a[8:8 + nr, 0:3] = rows_f.reshape(nr, 3) * (sc[:3] * inv_ab)
+        a[8:8 + nr, 3:6] = rows_t.reshape(nr, 3) * (sc[3:] * inv_ab)
+        a[8:8 + nr, 6] = 1.0
+        a[8 + nr:, :] = 0.0
         lo[:6] = -1.0
         up[:6] = 1.0
-        lo[7:7 + nr] = lower.reshape(nr) * inv_ab
+        lo[8:8 + nr] = lower.reshape(nr) * inv_ab
         # rows no wrench within the limits can violate are left out (exactly: a row's least
         # value over the bounds is -sum |coefficient|): fewer near-duplicate rows for ADMM
-        rows = a[7:7 + nr, :6]
-        never = -np.abs(rows).sum(axis=1) >= lo[7:7 + nr]
-        lo[7:7 + nr][never] = -INF
-        lo[7 + nr:] = -INF
+        rows = a[7:8 + nr, :6]
+        never = -np.abs(rows).sum(axis=1) >= lo[7:8 + nr]
+        lo[7:8 + nr][never] = -INF
+        lo[8 + nr:] = -INF
         qv = np.concatenate([-2.0 * np.r_[f_nom, t_nom] / sc, [SLACK_LIN]])
         s = self._solver
         s.update(q=qv, l=lo, u=up, Ax=a.ravel(order="F"))
@@ -285,6 +308,18 @@ class SafetyFilter:
         return SafetyResult(f, t, True, True, False,
                             float(np.linalg.norm(np.r_[f - f_nom, t - t_nom])), max(slack, 0.0),
                             h, h1, sel)
+
+    def _rate_row(self, w: np.ndarray, gyro: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """The angular-rate barrier as row_f . F + row_t . tau >= lower (body frame):
+        -2 w . alpha + k_omega (w_max^2 - |w|^2) >= 0 with alpha = I^-1 (tau - c x F - w x I w).
+        No limit (flight mode off): a row that always holds."""
+        if self.omega_max <= 0:
+            return np.zeros(3), np.zeros(3), -INF
+        wi = self.inertia_inv.T @ w                          # w . I^-1 v == wi . v
+        h = self.omega_max ** 2 - float(w @ w)
+        row_t = -2.0 * wi
+        row_f = 2.0 * (wi @ _skew(self.com))                 # +2 wi . (c x F)
+        return row_f, row_t, -self.k_omega * h - 2.0 * float(wi @ gyro)
 
     def braking_wrench(self, velocity: np.ndarray, omega: np.ndarray,
                        orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
