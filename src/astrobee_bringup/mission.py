@@ -141,6 +141,7 @@ class RobotWatch:
         pre = mc.ns(name) + "/"
         self.name = name
         self.label = sm.robot_label(name)
+        self.named = sm.robot_named(name)
         self.series = sm.Series()
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
         self.sim_time = float("nan")
@@ -179,7 +180,7 @@ class RobotWatch:
             fault = (sm._t(msg.header.stamp), f"{msg.source}: {msg.message} (code {msg.code})")
             self.fault_active = fault
             self.faults.append(fault)
-            self.log.warn(f"fault of robot {self.label}: {fault[1]}")
+            self.log.warn(f"fault of {self.named}: {fault[1]}")
         else:
             self.fault_active = None
 
@@ -389,7 +390,7 @@ class MissionClient:
             late = [w for w in ws if not (w.pose is not None and
                                           float(np.linalg.norm(w.pose[0] - starts[w.name])) < 0.5
                                           and w.mob_state in (IDLE, STOPPED))]
-            return ("; ".join(f"robot {w.label}: " + ("no pose" if w.pose is None else
+            return ("; ".join(f"{w.named}: " + ("no pose" if w.pose is None else
                               "not at its start" if np.linalg.norm(w.pose[0] - starts[w.name]) >= 0.5
                               else f"no controller ready ({mc.robot_topic(w.name, sm.MOB_STATE)}: "
                                    f"{NAMES.get(w.mob_state, w.mob_state)})") for w in late)
@@ -448,14 +449,14 @@ class MissionClient:
         # dies with it) shows up as the sim's watchdog fault: stop waiting then, too.
         self.spin_until(lambda: all(w.controlling_since(marks[w.name]) for w in ws) or faulted(),
                         30.0, lambda: "the controllers to accept their segments (" + ", ".join(
-                            f"robot {w.label}" for w in ws if not w.controlling_since(marks[w.name]))
+                            w.named for w in ws if not w.controlling_since(marks[w.name]))
                         + " did not)", tick)
         self.spin_until(finished, wall_timeout, "the end of the flight", tick)
         res.sim_t1, res.wall_t1 = self.sim_time, time.time()
         res.sim_time = self.sim_time - t_sent
         if fault_seen:
             first = min(((w.faults[0][0], w) for w in ws if w.faults), key=lambda x: x[0])[1]
-            raise MissionError(f"flight aborted on a fault of robot {first.label}: {first.faults[0][1]}"
+            raise MissionError(f"flight aborted on a fault of {first.named}: {first.faults[0][1]}"
                                if len(ws) > 1 else f"flight aborted on a fault: {first.faults[0][1]}")
         t_acc = min(next(t for t, s, _ in w.mob_changes[marks[w.name]:] if s == CONTROLLING)
                     for w in ws)
@@ -552,6 +553,9 @@ class MissionClient:
                 t, why = w.faults[0][0], f"fault: {w.faults[0][1]}"
             elif r.contacts:
                 t, why = s.first_contact(sm.contact_name(w.name)), "touched the station"
+            elif aborted:       # not the cause: it stopped with the leg
+                r.reason = f"stopped with the aborted leg ({r.reason})"
+                continue
             else:
                 t, why = w.sim_time, r.reason
             if t is not None and t == t:
@@ -559,7 +563,7 @@ class MissionClient:
         res.robots = [asdict(r) for r in robots]
         res.realism = dict(self.realism.get("knobs") or {})
         res.disturbances = list(self.realism.get("applied") or [])
-        res.faults = [text if len(ws) == 1 else f"robot {w.label}: {text}"
+        res.faults = [text if len(ws) == 1 else f"{w.named}: {text}"
                       for w in ws for _, text in w.faults]
         lead = robots[0] if robots else None
         if lead is not None:

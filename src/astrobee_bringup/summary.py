@@ -148,8 +148,13 @@ def contact_name(robot: str) -> str:
 
 
 def robot_label(robot: str) -> str:
-    """How summaries and plots name a robot: its namespace, "robot" for the default one."""
+    """How plots name a robot: its namespace, "robot" for the default one."""
     return contact_name(robot)
+
+
+def robot_named(robot: str) -> str:
+    """How reasons and log lines name a robot: "robot bumble", "the default robot"."""
+    return f"robot {robot}" if robot else "the default robot"
 
 
 @dataclass
@@ -206,7 +211,7 @@ def leg_verdict(robots: list[RobotResult], tolerance_position: float | None,
         r.reason = "goal reached" if not probs else "; ".join(probs)
         if probs and not aborted:
             parts.append("; ".join(probs) if len(robots) == 1 else
-                         f"robot {robot_label(r.name)}: {'; '.join(probs)}")
+                         f"{robot_named(r.name)}: {'; '.join(probs)}")
     if cargo_contacts:
         parts.append(f"cargo bag: {cargo_contacts} contact samples")
     ok = not parts and bool(robots)
@@ -220,11 +225,11 @@ def run_verdict(legs: list[dict[str, Any]]) -> tuple[bool, str]:
     robot named. Returns (success, reason: the failing legs' reasons)."""
     bad = []
     for leg in legs:
-        faults = [f"robot {robot_label(r['name'])}: {f}" for r in leg.get("robots", [])
+        faults = [f"{robot_named(r['name'])}: {f}" for r in leg.get("robots", [])
                   for f in r.get("faults", [])]
         if not leg.get("success") or faults:
             why = leg.get("reason", "") or "; ".join(faults)
-            if faults and not any(robot_label(r["name"]) in why for r in leg.get("robots", [])
+            if faults and not any(robot_named(r["name"]) in why for r in leg.get("robots", [])
                                   if r.get("faults")):
                 why += " (faults: " + "; ".join(faults) + ")"
             bad.append(f"{leg.get('scenario', '?')}: {why}")
@@ -248,7 +253,7 @@ def read_bag(bag_dir: str | os.PathLike, namespace: str = "",
     reader = BagReader(bag_dir)
     lo, hi = (log_window[0] * 1e9, log_window[1] * 1e9) if log_window else (-1.0, float("inf"))
     for m in reader.messages(list(handlers)):
-        if not lo <= m.log_time_ns <= hi:
+        if not lo <= m.publish_time_ns <= hi:   # wall receive time (log time may be sim time)
             continue
         try:
             msg = typestore.deserialize(m.data, m.topic.type)
@@ -353,8 +358,10 @@ def plot(series: "Series | dict[str, Series]", path: str | os.PathLike, boxes: n
     arrays = {n: (np.asarray(s.position, float).reshape(-1, 3),
                   np.asarray(s.ref_position, float).reshape(-1, 3)) for n, s in per.items()}
     cargo = np.asarray(first.bag_position, float).reshape(-1, 3)
+    ends = [np.asarray(r[k][:3], float)[None] for r in info.values() for k in ("start", "goal")
+            if len(r.get(k) or []) >= 3]     # the whole route is in view, even when cut short
     pts = np.vstack([a for pr in arrays.values() for a in pr if len(a)]
-                    + ([cargo] if len(cargo) else []) or [np.zeros((1, 3))])
+                    + ([cargo] if len(cargo) else []) + ends or [np.zeros((1, 3))])
     if t0 is None:
         starts = [s.pose_t[0] for s in per.values() if s.pose_t]
         t0 = min(starts) if starts else 0.0
@@ -395,13 +402,17 @@ def plot(series: "Series | dict[str, Series]", path: str | os.PathLike, boxes: n
                                 label=what)
         if len(cargo):
             ax.plot(cargo[:, i], cargo[:, j], color=CARGO_COLOUR, lw=1, ls="-.", label="cargo bag")
-        for n, f in failures:
+        for k, (n, f) in enumerate(failures):
             p = f.get("position") or []
             if len(p) >= 3:
+                when = f" at t={float(f['t']) - t0:.1f} s" if f.get("t") is not None else ""
                 ax.plot(p[i], p[j], "X", color="red", ms=14, mec="k", zorder=5)
-                ax.annotate(f"{robot_label(n)}: {textwrap.shorten(str(f.get('why', '')), 60)}",
-                            (p[i], p[j]), xytext=(10, 12), textcoords="offset points",
-                            color="red", fontsize=9, weight="bold")
+                right = p[i] > 0.5 * (pts[:, i].min() + pts[:, i].max())
+                ax.annotate(f"{robot_label(n)}{when}: {textwrap.shorten(str(f.get('why', '')), 70)}",
+                            (p[i], p[j]), xytext=(-12 if right else 12, 14 + 18 * k),
+                            textcoords="offset points", ha="right" if right else "left",
+                            color="red", fontsize=9, weight="bold",
+                            bbox=dict(boxstyle="round", fc="white", ec="red", alpha=0.85))
         ax.set_xlim(lo[i], hi[i])
         ax.set_ylim(lo[j], hi[j])
         ax.set_aspect("equal")

@@ -1,0 +1,98 @@
+"""The per-robot verdict of a leg and of a run (summary.leg_verdict / run_verdict), and the plot
+of a failed two-robot leg, without any process."""
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+
+from astrobee import config
+from astrobee_bringup import summary as sm
+
+TOL_P, TOL_A = 0.2, 0.35
+
+
+def _robot(name: str, **kw) -> sm.RobotResult:
+    base = dict(final_position_error=0.01, final_attitude_error=0.01)
+    base.update(kw)
+    return sm.RobotResult(name=name, **base)
+
+
+def test_every_robot_at_its_goal_is_a_success():
+    robots = [_robot(""), _robot("bumble")]
+    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A)
+    assert ok and why == "goal reached"
+    assert all(r.success and r.reached_goal and r.reason == "goal reached" for r in robots)
+
+
+def test_one_robot_off_its_goal_fails_the_leg_naming_it():
+    robots = [_robot(""), _robot("bumble", final_position_error=0.5)]
+    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A)
+    assert not ok and why.startswith("robot bumble: final position error 0.500 m")
+    assert robots[0].success and not robots[1].success and not robots[1].reached_goal
+
+
+def test_a_fault_or_a_contact_fails_even_at_the_goal():
+    robots = [_robot("", contacts=3), _robot("bumble", faults=["sim/propulsion_watchdog: x"])]
+    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A)
+    assert not ok
+    assert "the default robot: 3 contact samples" in why and "robot bumble: fault: sim/propulsion_watchdog" in why
+    assert all(r.reached_goal and not r.success for r in robots)
+
+
+def test_cargo_bag_contact_and_unknown_pose_fail():
+    ok, why = sm.leg_verdict([_robot("")], TOL_P, TOL_A, cargo_contacts=2)
+    assert not ok and why == "cargo bag: 2 contact samples"
+    r = _robot("", final_position_error=None)
+    ok, why = sm.leg_verdict([r], TOL_P, TOL_A)
+    assert not ok and "unknown (no pose)" in why and not r.reached_goal
+    ok, why = sm.leg_verdict([], TOL_P, TOL_A)
+    assert not ok and why == "no robot flown"
+
+
+def test_an_aborted_leg_keeps_its_cause_as_the_reason():
+    robots = [_robot("", final_position_error=3.0), _robot("bumble", faults=["watchdog"])]
+    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A, aborted="flight aborted on a fault of robot bumble")
+    assert not ok and why == "flight aborted on a fault of robot bumble"
+    assert not robots[0].success and not robots[1].success
+
+
+def test_any_fault_in_any_leg_fails_the_run_with_the_robot_named():
+    good = {"scenario": "a", "success": True, "reason": "goal reached",
+            "robots": [asdict(_robot(""))]}
+    ok, why = sm.run_verdict([good])
+    assert ok
+    # a leg marked successful that still carries a fault (e.g. written by an older client)
+    faulty = {"scenario": "b", "success": True, "reason": "goal reached",
+              "robots": [asdict(_robot("")), asdict(_robot("bumble", faults=["watchdog"]))]}
+    ok, why = sm.run_verdict([good, faulty])
+    assert not ok and "b:" in why and "robot bumble: watchdog" in why
+    ok, why = sm.run_verdict([])
+    assert not ok
+
+
+def test_plot_of_a_failed_two_robot_leg(tmp_path):
+    """Every robot's path and the failure mark render; millimetres for small errors."""
+    per = {}
+    for name, y0 in (("", -0.45), ("bumble", 0.5)):
+        s = sm.Series()
+        for k in range(200):
+            t = 0.016 * k
+            s.pose_t.append(t)
+            s.position.append([10.95, y0 - 0.01 * k, 4.84])
+            s.orientation.append([0, 0, 0, 1])
+            s.ref_t.append(t)
+            s.ref_position.append([10.95, y0 - 0.01 * k, 4.84])
+            s.err_t.append(t)
+            s.pos_error.append(0.002 + 0.0005 * np.sin(k))
+            s.att_error.append(0.001)
+        per[name] = s
+    robots = [asdict(_robot("", start=[10.95, -0.45, 4.84], goal=[10.93, -6.0, 4.85])),
+              asdict(_robot("bumble", start=[10.95, 0.5, 4.84], goal=[10.93, -5.05, 4.85],
+                            failed_at={"t": 1.0, "position": [10.95, 0.4, 4.84], "why": "fault: x"}))]
+    out = sm.plot(per, tmp_path / "plot.png", config.keep_in_boxes(), title="t: FAILED",
+                  robots=robots, t0=0.0, success=False)
+    assert out.stat().st_size > 20_000
+    assert sm._unit(0.0025) == (1000.0, "mm") and sm._unit(0.5) == (1.0, "m")
+    labels = [n for n, _, _ in sm._module_labels((1, 0), np.array([10, -7, 4]), np.array([12, 1, 6]))]
+    assert "JEM" in labels and "node 2" in labels and "node 1" not in labels
