@@ -17,6 +17,9 @@ $(STAMP): pyproject.toml setup.py
 test: $(STAMP)
 	$(PY) -m pytest -q tests
 
+# three legs in one graph (cargo_transport.DEMO_LEGS): no bag (PD), the FEM bag (fast solver,
+# PD), the FEM bag flown by the sampling MPC (robot queen); runs/<t>/: summary.json, one plot
+# and one MP4 per leg
 demo: $(STAMP)
 	$(VENV)/bin/astrobee launch cargo_transport --demo
 
