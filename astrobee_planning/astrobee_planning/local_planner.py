@@ -7,18 +7,27 @@ reduce to the same quintic):
     P0 = p0, P1 = p0 + v0 T/5, P2 = p0 + 2 v0 T/5 + a0 T^2/20   (and mirrored at the end).
 Attitude: the quintic quaternion polynomial of quaternion_poly (world-frame rates).
 `plan_batch` does N plans at once (vectorised) for the sampling MPC.
+Requests from outside go through `plan_within_limits` (bounded duration, start, goal and path
+in the station, every rate within the flight mode's hard limits; ValueError otherwise).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from astrobee import config, flight_modes
 from astrobee import rotations as rot
 
 from . import bezier
+from .boxes import OutsideSafeSet
 from .quaternion_poly import _H, QuaternionPolynomial
 from .trajectory import BezierPiece, Trajectory
 
 _HT = np.ascontiguousarray(_H)
+MAX_DURATION = 600.0      # s: longest local plan (a 1e5 s request returned a million states)
+KEEP_IN_TOLERANCE = 0.05  # m: how far outside the keep-in boxes a local plan's centre may be
+                          # (state estimates at a wall); the robot's sphere is not checked here
+LIMIT_TOLERANCE = 1e-6    # relative slack on the flight mode's limits (rounding)
+CHECK_SAMPLES = 200       # samples of a local plan checked against the limits and keep-in
 
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -102,6 +111,8 @@ def plan(start, goal, duration: float, t0: float = 0.0) -> Trajectory:
     acc, quat, omega, alpha; world-frame rates) over `duration` seconds."""
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError("duration must be positive and finite")
+    if duration > MAX_DURATION:
+        raise ValueError(f"duration {duration:.6g} s is longer than the {MAX_DURATION:g} s a local plan may last")
     g = lambda s, k: np.asarray(s[k] if isinstance(s, dict) else getattr(s, k), dtype=float)  # noqa: E731
     vals = [g(start, k) for k in ("pos", "vel", "acc", "quat", "omega", "alpha")] + \
            [g(goal, k) for k in ("pos", "vel", "acc", "quat", "omega", "alpha")]
@@ -114,6 +125,78 @@ def plan(start, goal, duration: float, t0: float = 0.0) -> Trajectory:
     pts, coef = plan_single(p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1, duration)
     return Trajectory([BezierPiece(pts, float(t0), float(duration))],
                       [QuaternionPolynomial(coef, float(t0), float(duration))])
+
+
+def _outside_keep_in(pos: np.ndarray, keep_in: np.ndarray, tol: float) -> np.ndarray:
+    """Per row of pos (M, 3): outside every keep-in box grown by tol."""
+    inside = np.all((pos[:, None, :] >= keep_in[None, :, :3] - tol)
+                    & (pos[:, None, :] <= keep_in[None, :, 3:] + tol), axis=2)
+    return ~inside.any(axis=1)
+
+
+def _limit_excess(tr: Trajectory, mode) -> tuple[str, float, float] | None:
+    """(quantity, peak, limit) of the worst rate beyond the mode's hard limits, or None."""
+    st = tr.sample(np.linspace(0.0, tr.duration, CHECK_SAMPLES))
+    worst = None
+    for key, lim, unit in (("vel", mode.hard_limit_vel, "m/s"), ("acc", mode.hard_limit_accel, "m/s^2"),
+                           ("omega", mode.hard_limit_omega, "rad/s"), ("alpha", mode.hard_limit_alpha, "rad/s^2")):
+        peak = float(np.max(np.linalg.norm(getattr(st, key), axis=1)))
+        if peak > lim * (1 + LIMIT_TOLERANCE) and (worst is None or peak / lim > worst[1] / worst[2]):
+            worst = (f"|{key}| {peak:.4g} {unit}", peak, lim)
+    return worst
+
+
+def shortest_duration(start, goal, mode, longest: float = MAX_DURATION) -> float | None:
+    """About the shortest duration (within 1%) whose local plan stays within the mode's limits
+    (doubling then bisection), or None when not even `longest` does."""
+    if _limit_excess(plan(start, goal, longest), mode) is not None:
+        return None
+    lo, hi = 0.0, 1.0
+    while hi < longest and _limit_excess(plan(start, goal, hi), mode) is not None:
+        lo, hi = hi, min(2.0 * hi, longest)
+    while hi - lo > 0.01 * hi:
+        mid = 0.5 * (lo + hi)
+        if _limit_excess(plan(start, goal, mid), mode) is None:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def plan_within_limits(start, goal, duration: float, flight_mode: str | None = None,
+                       t0: float = 0.0, keep_in: np.ndarray | None = None) -> Trajectory:
+    """`plan` for a request from outside, with bounds: duration in (0, MAX_DURATION]; the
+    start, the goal and every sampled centre on the way inside the keep-in boxes (config/iss.yaml
+    unless given; KEEP_IN_TOLERANCE slack; OutsideSafeSet otherwise); the plan's |v|, |a|, |w|,
+    |alpha| within the flight mode's hard limits. A duration too short for the limits is
+    rejected, not stretched (the caller asked for that timing), with the shortest that would do.
+    Raises ValueError (one line)."""
+    tr = plan(start, goal, duration, t0)
+    keep_in = config.keep_in_boxes() if keep_in is None else np.asarray(keep_in, dtype=float)
+    g = lambda s: np.asarray(s["pos"] if isinstance(s, dict) else s.pos, dtype=float)  # noqa: E731
+    for name, p in (("start", g(start)), ("goal", g(goal))):
+        if _outside_keep_in(p[None], keep_in, KEEP_IN_TOLERANCE)[0]:
+            raise OutsideSafeSet(f"local plan {name} {np.round(p, 3).tolist()} is outside the "
+                                 f"station's keep-in boxes")
+    pos = tr.sample(np.linspace(0.0, duration, CHECK_SAMPLES) + t0).pos
+    out = _outside_keep_in(pos, keep_in, KEEP_IN_TOLERANCE)
+    if out.any():
+        raise OutsideSafeSet(f"local plan leaves the station's keep-in boxes at "
+                             f"{np.round(pos[np.argmax(out)], 3).tolist()}")
+    try:
+        mode = flight_modes.get(flight_mode or None)
+    except flight_modes.UnknownFlightMode as exc:
+        raise ValueError(str(exc)) from exc
+    if not mode.control_enabled or mode.hard_limit_vel <= 0:
+        raise ValueError(f"flight mode {mode.name!r} does not allow motion")
+    worst = _limit_excess(tr, mode)
+    if worst is not None:
+        need = shortest_duration(start, goal, mode)
+        hint = (f"; at least {need:.3g} s would do" if need is not None else
+                "; no duration up to the maximum would (boundary states beyond the limits?)")
+        raise ValueError(f"a {duration:.6g} s local plan needs {worst[0]}, beyond the "
+                         f"{mode.name} limit {worst[2]:.4g}{hint}")
+    return tr
 
 
 def plan_batch(p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1, durations

@@ -25,8 +25,9 @@ from roszen import node_main
 from roszen.parameters import runtime
 
 from . import conversions as cv
-from . import local_planner, multi_robot, planner
-from .planner import INVALID_COMMAND, PLAN_FAILED, SUCCESS, PlanError
+from . import local_planner, multi_robot, planner, trajectory
+from .boxes import OutsideSafeSet
+from .planner import INVALID_COMMAND, PLAN_FAILED, SUCCESS, VIOLATES_KEEP_IN, PlanError
 
 
 class PlannerNode:
@@ -89,7 +90,10 @@ class PlannerNode:
             plan = planner.plan_global(p0, q0, p1, q1, mode, bool(req.face_forward),
                                        float(req.carry_extent))
             traj = plan.trajectory
-            states = traj.sample_rate(rate)
+            try:
+                states = traj.sample_rate(rate, max_states=trajectory.MAX_STATES)
+            except ValueError as exc:
+                raise PlanError(INVALID_COMMAND, str(exc)) from exc
             resp.segment = cv.states_to_msgs(states, self.ControlState)
             resp.position_spline = [cv.bezier_to_msg(p, self.BezierCurve, self.Point)
                                     for p in traj.position]
@@ -176,8 +180,12 @@ class PlannerNode:
             rate = self._rate(req.sample_rate)
             start = cv.control_state_to_dict(req.start)
             goal = cv.control_state_to_dict(req.goal)
-            try:
-                traj = local_planner.plan(start, goal, float(req.duration))
+            try:     # bounded: duration, states, keep-in, the flight mode's limits (issue 19)
+                traj = local_planner.plan_within_limits(start, goal, float(req.duration),
+                                                        self.current_mode or self.default_mode)
+                trajectory.check_sample_count(traj.duration, rate)
+            except OutsideSafeSet as exc:
+                raise PlanError(VIOLATES_KEEP_IN, str(exc)) from exc
             except ValueError as exc:
                 raise PlanError(INVALID_COMMAND, str(exc)) from exc
             t_start = cv.time_of(req.start.when)

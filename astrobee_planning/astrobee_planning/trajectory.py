@@ -23,6 +23,27 @@ BLOCK = 3072   # samples evaluated together: the work rows of a block stay in ca
                # matrix products stay below OpenBLAS's threading size (a threaded call on these
                # thin shapes costs 20x more on a busy machine)
 _work = threading.local()
+MAX_STATES = 100_000   # states a sampling may return for a request from outside (a service
+                       # response): 285 s at 350 Hz; a million took 65 s and 2 GB (issue 19)
+
+
+def sample_count(duration: float, rate: float) -> int:
+    """Number of states of `Trajectory.sample_rate(rate)` over `duration` s (end included)."""
+    if not (np.isfinite(rate) and rate > 0):
+        raise ValueError(f"sample rate must be positive and finite (got {rate})")
+    if not (np.isfinite(duration) and duration >= 0):
+        raise ValueError(f"duration must be finite and >= 0 (got {duration})")
+    n = int(np.floor(duration * rate + 1e-9)) + 1
+    return n + 1 if (n - 1) / rate < duration - 1e-9 else n      # the end is always a state
+
+
+def check_sample_count(duration: float, rate: float, max_states: int = MAX_STATES) -> int:
+    """`sample_count`, or ValueError (one line) when it exceeds max_states."""
+    n = sample_count(duration, rate)
+    if n > max_states:
+        raise ValueError(f"{duration:.6g} s at {rate:.6g} Hz is {n} states, more than the "
+                         f"{max_states} a request may ask for: lower the sample rate or the duration")
+    return n
 
 
 def _workspace(rows: int) -> np.ndarray:
@@ -174,10 +195,13 @@ class Trajectory:
             t, p, quat, om, al = t[inv], p[inv], quat[inv], om[inv], al[inv]
         return State(t, p[:, :3], p[:, 3:6], p[:, 6:], quat, om, al)
 
-    def sample_rate(self, rate: float) -> State:
-        """States every 1/rate seconds from 0 to the end (end included)."""
+    def sample_rate(self, rate: float, max_states: int | None = None) -> State:
+        """States every 1/rate seconds from 0 to the end (end included); ValueError when that
+        is more than max_states (None: no cap)."""
         if not rate > 0:
             raise ValueError("sample rate must be positive")
+        if max_states is not None:
+            check_sample_count(self.duration, rate, max_states)
         n = int(np.floor(self.duration * rate + 1e-9)) + 1
         t = np.arange(n) / rate
         if t[-1] < self.duration - 1e-9:
