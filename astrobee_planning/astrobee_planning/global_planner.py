@@ -45,6 +45,7 @@ MIN_SEGMENT_TIME = 0.2  # x v/a: shortest segment the profile makes inside a leg
 MAX_SEGMENTS = 40       # split no further than this many segments in all (QP size)
 RETIME_STEPS = 7        # retiming solves after the first (stops early without progress)
 TRACK_WEIGHT = 1.0      # pull of the straight-leg joints to the speed profile's points
+QP_TOLERANCE = 1e-7      # Clarabel gap/feasibility tolerances (default 1e-8: 3 more iterations a solve)
 HULL_SPLITS = 2         # derivative curves subdivided 2^k times for the norm bound
 
 
@@ -174,6 +175,7 @@ class SplineQP:
         self._box_b = np.concatenate([hi_b, -lo_b])
         self.solver: clarabel.DefaultSolver | None = None
         self.solves = 0
+        self.iterations = 0             # interior-point iterations over all solves
 
     def _scales(self, T: np.ndarray) -> np.ndarray:
         out = np.ones(1 + 2 * (self.S - 1) * self.c)
@@ -209,6 +211,7 @@ class SplineQP:
             st.verbose = False
             st.presolve_enable = False
             st.max_iter = 100
+            st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = QP_TOLERANCE
             p = self._p.copy(); p.data = px
             a = self._a.copy(); a.data = ax
             self.solver = clarabel.DefaultSolver(
@@ -217,6 +220,7 @@ class SplineQP:
         else:
             self.solver.update(P=px, A=ax, b=b)
         res = self.solver.solve()
+        self.iterations += int(res.iterations)
         if str(res.status) not in ("Solved", "AlmostSolved") or res.x is None or len(res.x) != self.nx:
             return None
         x = np.asarray(res.x).reshape(3, self.S, self.N).transpose(1, 2, 0)
@@ -393,6 +397,7 @@ class PositionPlan:
     solves: int
     planning_time: float
     lower_bound: float = 0.0            # s: trapezoid on the shortest polyline of the route
+    iterations: int = 0                 # interior-point iterations over all QP solves
 
     @property
     def gap(self) -> float:
@@ -480,7 +485,8 @@ def plan_position(start: np.ndarray, goal: np.ndarray, v_max: float, a_max: floa
             raise PlanningError("could not meet the limits with the given boundary states")
     spline = Spline(points=x, durations=T, boxes=rboxes)
     return PositionPlan(spline=spline, route=route, solves=qp.solves,
-                        planning_time=time.perf_counter() - t_start, lower_bound=lower)
+                        planning_time=time.perf_counter() - t_start, lower_bound=lower,
+                        iterations=qp.iterations)
 
 
 __all__ = ["PlanningError", "Spline", "SplineQP", "PositionPlan", "plan_position", "NoRoute",

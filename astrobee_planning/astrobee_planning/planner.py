@@ -134,7 +134,7 @@ def plan_global(start_pos, start_quat, goal_pos, goal_quat, flight_mode: str | N
     else:
         traj = _blend_trajectory(spline, q0, q1, wmax, amax)
     traj.info.update(route=pp.route, solves=pp.solves, flight_mode=mode.name,
-                     lower_bound=pp.lower_bound)
+                     lower_bound=pp.lower_bound, qp_iterations=pp.iterations)
     _check_limits(traj, mode)
     return GlobalPlan(traj, spline, pp.route, time.perf_counter() - t_start)
 
