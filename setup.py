@@ -9,6 +9,7 @@ ROOTS = {
     "roszen": "src/roszen",
     "astrobee": "src/astrobee",
     "astrobee_bringup": "src/astrobee_bringup",
+    "astrobee_lab": "src/astrobee_lab",
     "astrobee_sim": "astrobee_sim/astrobee_sim",
     "astrobee_planning": "astrobee_planning/astrobee_planning",
     "astrobee_control": "astrobee_control/astrobee_control",

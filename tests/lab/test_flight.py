@@ -1,0 +1,104 @@
+"""astrobee_lab.flight: a leg flown in-process (simulator + planner + law, no transport)."""
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+import pytest
+
+from astrobee_lab.flight import Flight, FlightResult
+
+pytest.importorskip("pybullet")
+
+COST_FIELDS = {"wall_time", "real_time_factor", "compute_ms_median", "compute_ms_p99",
+               "planning_time"}
+ROW_FIELDS = {"scenario", "bag_model", "bag_variant", "bag_mass", "flight_mode", "controller",
+              "safety", "realism", "seed", "success", "cause", "rms_position_error",
+              "min_robot_clearance", "min_bag_clearance", "contacts", "peak_bag_robot_speed",
+              "time_to_goal", "plan_duration", "sim_time", "wall_time", "compute_ms_median",
+              "compute_ms_p99"}
+
+
+def test_pd_flight_with_rigid_bag_reaches_goal_and_row_has_the_fields(rigid_hop):
+    with Flight(rigid_hop, seed=0, controller="pd") as f:
+        res = f.run()
+    assert isinstance(res, FlightResult)
+    assert res.success, res.cause
+    assert res.cause == "goal reached"
+    m = res.metrics
+    assert m["contacts"] == 0 and m["final_position_error"] <= 0.2
+    assert m["rms_position_error"] < 0.01
+    assert m["min_bag_clearance"] > 0 and m["min_robot_clearance"] > 0
+    assert 0 < m["time_to_goal"] <= res.sim_time
+    assert res.sim_time >= res.plan_duration     # flown to the end of the segment, then settled
+    row = res.row()
+    assert ROW_FIELDS <= set(row), ROW_FIELDS - set(row)
+    assert row["bag_model"] == "rigid" and row["controller"] == "pd" and row["seed"] == 0
+    assert all(isinstance(v, (str, int, float, bool)) for v in row.values())
+    assert "roszen" not in sys.modules and "zenoh" not in sys.modules
+
+
+def test_same_arguments_and_seed_give_the_same_flight(make_hop):
+    """With the realism knobs on (seeded noise in the estimate and the actuation) two flights of
+    the same seed agree to the bit; another seed flies differently."""
+    def row(seed):
+        with Flight(make_hop(None, goal_y=0.2), seed=seed, realism="astrobee") as f:
+            r = f.run().row()
+        # nan (no bag) as a string, so that equal rows compare equal
+        return {k: repr(v) for k, v in r.items() if k not in COST_FIELDS}
+    a, b, c = row(3), row(3), row(4)
+    assert a == b
+    assert a["rms_position_error"] != c["rms_position_error"]
+
+
+def test_a_hard_push_into_the_wall_fails_on_contact(make_hop):
+    push = {"disturbances": [{"target": "robot", "force": [-30.0, 0.0, 0.0], "time": 1.0,
+                              "duration": 1.0}]}
+    with Flight(make_hop(None, goal_y=0.2), realism=push, task={"end_on_contact": True}) as f:
+        f.reset()
+        for _ in range(600):
+            f.step()
+            if f.monitor.terminated:
+                break
+        ok, cause = f.monitor.verdict()
+    assert not ok
+    assert "contact samples (robot-iss)" in cause
+
+
+def test_a_goal_outside_the_station_fails_at_planning(make_hop):
+    sc = make_hop(None, goal_y=0.2)
+    from dataclasses import replace
+    sc = replace(sc, goal_position=(10.95, 0.2, 9.0))
+    with Flight(sc) as f:
+        res = f.run()
+    assert not res.success
+    assert res.cause.startswith("planning failed (code -29)")
+    assert res.ticks == 0 and math.isnan(res.plan_duration)
+
+
+def test_the_time_limit_ends_a_flight(make_hop):
+    with Flight(make_hop(None, goal_y=0.2)) as f:
+        res = f.run(max_time=2.0)
+    assert not res.success and "time limit of 2 s" in res.cause
+    assert res.sim_time == pytest.approx(2.0, abs=0.02)
+
+
+def test_step_action_adds_to_or_replaces_the_law_wrench(make_hop):
+    with Flight(make_hop(None, goal_y=0.2), state_source="truth") as f:
+        obs = f.reset()
+        nominal = obs.robots[""].nominal.copy()
+        f.step(np.array([0.1, 0, 0, 0, 0, 0]))
+        assert np.allclose(f._applied[""], nominal + [0.1, 0, 0, 0, 0, 0])
+        f.step(np.zeros(6), mode="replace")
+        assert np.allclose(f._applied[""], 0.0)
+
+
+def test_bad_arguments_are_one_line_errors(make_hop):
+    with pytest.raises(ValueError, match="controller must be pd or mpc"):
+        Flight(make_hop(None), controller="lqr").reset()
+    with pytest.raises(ValueError, match="one robot"):
+        Flight("two_robots_bag")
+    from astrobee.scenario import ScenarioError
+    with pytest.raises(ScenarioError):
+        Flight("node2_to_jem", bag_model="nonsense")
