@@ -8,12 +8,22 @@ the way of a nominal flight. Prints one table.
   trajectory tracked by the PD law on the numpy rigid body, as in bench/control_tracking.py),
   without and with a carried bag (10 kg, 0.25 x 0.42 x 0.50 m, centre 0.45 m ahead of the
   robot, its corners as envelope points); target 0.
+- with `--graph N`: N pairs of `astrobee launch cargo_transport scenario:=node2_to_jem
+  safety:=false|true` (lockstep, run alternately so machine load hits both alike): each run's
+  real-time factor and wall time, the filtered flights' interventions (from the recorded
+  /gnc/ctl/safety diagnostics) and their largest pose difference from the first unfiltered
+  flight (recorded /loc/truth/pose, aligned at the moment the robot starts to move). This is
+  the default-on measurement: transparency and the cost of one more process on 2 cores.
 
-    .venv/bin/python bench/safety_bench.py
+    .venv/bin/python bench/safety_bench.py [--graph 2]
 """
 from __future__ import annotations
 
+import argparse
+import json
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -95,7 +105,80 @@ def broken(bag: bool) -> dict:
             "h_min": h_min}
 
 
+def graph_flight(safety: bool, run_dir: Path) -> dict:
+    """One launch of Node 2 -> JEM into run_dir: summary figures, wall time, recorded poses."""
+    from roszen import typestore
+    from roszen.bag.reader import BagReader
+    from roszen.testing import free_port
+    cmd = [sys.executable, "-m", "astrobee_bringup.cli", "launch", "cargo_transport",
+           "scenario:=node2_to_jem", f"safety:={str(safety).lower()}", "--run-dir", str(run_dir),
+           "--port", str(free_port())]
+    t0 = time.monotonic()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    wall = time.monotonic() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"launch failed ({proc.returncode}): {proc.stdout[-1500:]}")
+    leg = json.loads((run_dir / "summary.json").read_text())["legs"][0]
+    poses, diag = [], None
+    for m in BagReader(run_dir / "bag").messages(["/loc/truth/pose", "/gnc/ctl/safety"]):
+        msg = typestore.deserialize(m.data, m.topic.type)
+        if m.topic.name == "/gnc/ctl/safety":
+            diag = {kv.key: kv.value for kv in msg.status[0].values}
+            continue
+        p, q = msg.pose.position, msg.pose.orientation
+        poses.append([msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
+                      p.x, p.y, p.z, q.x, q.y, q.z, q.w])
+    poses = np.array(sorted(poses))
+    moved = np.linalg.norm(poses[:, 1:4] - poses[0, 1:4], axis=1) > 1e-3
+    poses[:, 0] -= poses[np.argmax(moved), 0]          # t = 0 where the robot starts to move
+    return {"safety": safety, "success": bool(leg["success"]), "rtf": leg["real_time_factor"],
+            "wall": wall, "poses": poses, "contacts": leg["contacts"],
+            "ticks": int(diag["ticks"]) if diag else None,
+            "active": int(diag["active_ticks"]) if diag else None}
+
+
+def pose_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Largest position (m) and attitude (rad) difference of b from a over a's time span."""
+    t = a[:, 0][(a[:, 0] >= max(a[0, 0], b[0, 0])) & (a[:, 0] <= min(a[-1, 0], b[-1, 0]))]
+    pa = np.stack([np.interp(t, a[:, 0], a[:, i]) for i in range(1, 8)], axis=1)
+    pb = np.stack([np.interp(t, b[:, 0], b[:, i]) for i in range(1, 8)], axis=1)
+    dp = float(np.linalg.norm(pa[:, :3] - pb[:, :3], axis=1).max())
+    qa = pa[:, 3:] / np.linalg.norm(pa[:, 3:], axis=1, keepdims=True)
+    qb = pb[:, 3:] / np.linalg.norm(pb[:, 3:], axis=1, keepdims=True)
+    dq = float((2 * np.arccos(np.clip(np.abs(np.sum(qa * qb, axis=1)), 0, 1))).max())
+    return dp, dq
+
+
+def graph_table(pairs: int) -> None:
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(pairs):
+            for safety in (False, True):
+                runs.append(graph_flight(safety, Path(tmp) / f"{i}_{safety}"))
+    ref = next(r for r in runs if not r["safety"])["poses"]
+    print("\nthe graph: astrobee launch cargo_transport scenario:=node2_to_jem safety:=..., lockstep, "
+          "PD, 2 cores shared")
+    hdr = (f"{'safety':<8}{'goal':>6}{'rtf':>7}{'wall (s)':>10}{'ticks':>8}{'intervened':>12}"
+           f"{'max dp (m)':>12}{'max dq (rad)':>14}")
+    print(hdr)
+    print("-" * len(hdr))
+    for r in runs:
+        dp, dq = pose_difference(ref, r["poses"])
+        print(f"{str(r['safety']).lower():<8}{'yes' if r['success'] else 'NO':>6}{r['rtf']:>7.1f}"
+              f"{r['wall']:>10.1f}{r['ticks'] if r['ticks'] is not None else '-':>8}"
+              f"{r['active'] if r['active'] is not None else '-':>12}{dp:>12.2e}{dq:>14.2e}")
+    for s in (False, True):
+        rtf = [r["rtf"] for r in runs if r["safety"] == s]
+        print(f"safety:={str(s).lower()}: real-time factor mean {np.mean(rtf):.1f}x over {len(rtf)}")
+    print("pose differences are from the first unfiltered run (two unfiltered runs differ by the "
+          "lockstep's start timing, issue 19.9)")
+
+
 def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--graph", type=int, default=0, metavar="N",
+                    help="also fly N pairs of launches without/with the filter")
+    args = ap.parse_args()
     rows = [nominal_flight(False), nominal_flight(True), broken(False), broken(True)]
     print("CBF safety filter, nominal flight mode, 62.5 Hz, numpy rigid body (no transport)")
     print(f"reference: {rows[0]['source']}, {rows[0]['duration']:.1f} s + 5 s settle")
@@ -109,6 +192,8 @@ def main() -> int:
               f"{ms.max():>10.3f}{r['active']:>12d}{r['delta']:>10.2e}{r['h_min']:>11.3f}")
     print("targets: <= 0.5 ms per tick (median, p99) on one core; 0 ticks intervened on the "
           "nominal flights")
+    if args.graph > 0:
+        graph_table(args.graph)
     return 0
 
 
