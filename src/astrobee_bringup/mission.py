@@ -60,7 +60,7 @@ class LegResult:
     reason: str = ""
     flight_mode: str = ""
     carrying_bag: bool = False
-    carry_extent: float = 0.0                # m of planning margin for the bag
+    carry_extent: float = 0.0                # m of planning margin for the cargo bag
     start: list[float] = field(default_factory=list)
     goal: list[float] = field(default_factory=list)
     planning_time: float | None = None
@@ -380,7 +380,7 @@ class MissionClient:
             raise MissionError(f"scenario {name} has no robot {self.ns!r}: robots {names}")
         if not names or len(names) > 2:
             raise MissionError(f"scenario {name} has {len(names)} robots: the mission flies one "
-                               f"robot, or two carrying a bag in formation")
+                               f"robot, or two carrying a cargo bag in formation")
         self.flying = names
         ws = [self.watch(n) for n in names]
         starts = {n: mc.pose(info.starts[i])[0] for i, n in enumerate(names)}
@@ -472,7 +472,7 @@ class MissionClient:
         _set_pose(req.goal, goal_p, goal_q)
         req.flight_mode = fm.name
         req.face_forward = bool(info.face_forward)
-        # the bag trails along the path: the scenario's margin (bags.yaml's carry_extent default)
+        # the cargo bag trails along the path: the scenario's margin (bags.yaml's carry_extent default)
         req.carry_extent = float(info.carry_extent) if info.carrying_bag else 0.0
         res.carry_extent = req.carry_extent
         plan = self.call(self.planner, req, 120.0, mc.PLANNER_GLOBAL)

@@ -48,7 +48,7 @@ class Series:
     bag_position: list[list[float]] = field(default_factory=list)
     controlling: list[tuple[float, float]] = field(default_factory=list)  # CONTROLLING spans
 
-    # ---- feeding from messages (live subscriptions or a bag) -------------------------
+    # ---- feeding from messages (live subscriptions or a recording) -------------------------
     def add_pose(self, msg: Any) -> None:
         p, q = msg.pose.position, msg.pose.orientation
         self.pose_t.append(_t(msg.header.stamp))
