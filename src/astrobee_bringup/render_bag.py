@@ -138,7 +138,7 @@ def read_recording(bag_dir: str | os.PathLike,
     raw: dict[str, list[tuple[int, Any]]] = {n: [] for n in wanted}
     decode: dict[str, Callable] = {n: typestore.deserializer(topics[n]) for n in wanted}
     for m in reader.messages(wanted):
-        if lo <= m.log_time_ns <= hi:
+        if lo <= m.publish_time_ns <= hi:    # wall receive time (log time may be sim time)
             try:
                 raw[m.topic.name].append((m.log_time_ns, decode[m.topic.name](m.data)))
             except Exception:  # noqa: BLE001 - one bad record must not lose the video

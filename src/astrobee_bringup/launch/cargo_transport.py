@@ -166,10 +166,11 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
                                   parameters=[{"use_sim_time": True}], required=not mission))
     if ctx.flag("record", True):
         bag_dir = ctx.arg("bag_dir", str(ctx.run_dir / "bag"))
+        # stamped on sim time like every node of the launch: a lockstep flight replays at its pace
         nodes.append(NodeSpec("recorder", kind="recorder",
-                              command=["bag", "record", "-a", "-o", bag_dir],
-                              ros2_command=["ros2", "bag", "record", "-a", "-s", "mcap",
-                                            "-o", bag_dir]))
+                              command=["bag", "record", "-a", "--use-sim-time", "-o", bag_dir],
+                              ros2_command=["ros2", "bag", "record", "-a", "--use-sim-time",
+                                            "-s", "mcap", "-o", bag_dir]))
     if mission:
         import sys
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]

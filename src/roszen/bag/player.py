@@ -2,7 +2,9 @@
 
 Latched topics (TRANSIENT_LOCAL offered QoS) are republished latched, so late subscribers get
 them. With `clock_hz` the player publishes /clock (rosgraph_msgs/Clock) at that rate with the
-bag's time, for nodes running with use_sim_time.
+bag's time, for nodes running with use_sim_time; it is then the only time base on /clock: a
+/clock recorded in the bag is not republished (a bag recorded on sim time has the sim time as
+its time axis, so the player's clock is that sim time).
 """
 from __future__ import annotations
 
@@ -38,7 +40,8 @@ class Player:
 
     def __init__(self, node, reader: BagReader, *, rate: float = 1.0, loop: bool = False,
                  topics: list[str] | None = None, clock_hz: float = 0.0,
-                 start_offset: float = 0.0, delay: float = 0.0, settle: float = 0.3):
+                 start_offset: float = 0.0, delay: float = 0.0, settle: float = 0.3,
+                 exclude_topics: list[str] | None = None, exclude_regex: str | None = None):
         if not rate > 0:
             raise BagError(f"rate must be > 0, got {rate}")
         self.node = node
@@ -56,7 +59,14 @@ class Player:
             if missing:
                 raise BagError(f"topic '{missing[0]}' is not in the bag "
                                f"(has: {', '.join(sorted(known)) or 'none'})")
-        self.topics = topics or list(known)
+        import re
+        rx = re.compile(exclude_regex) if exclude_regex else None
+        skip = set(exclude_topics or [])
+        self.topics = [t for t in (topics or list(known))
+                       if t not in skip and not (rx and rx.search(t))]
+        if clock_hz > 0 and "/clock" in self.topics:
+            self.topics.remove("/clock")     # one time base on /clock: the player's
+            log("not republishing the recorded /clock: --clock publishes the bag's time")
         self.publishers: dict[str, object] = {}
         self.published = 0
 

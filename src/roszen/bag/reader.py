@@ -32,6 +32,11 @@ class BagMessage:
     topic: TopicInfo
     data: bytes
     log_time_ns: int
+    publish_time_ns: int = 0      # MCAP publish_time: our recorder's wall-clock receive time
+
+    def __post_init__(self) -> None:
+        if not self.publish_time_ns:
+            self.publish_time_ns = self.log_time_ns
 
 
 def _has_footer(path: Path) -> bool:
@@ -113,7 +118,8 @@ class BagReader:
                 reader = make_reader(f)
                 for schema, channel, msg in reader.iter_messages(
                         topics=list(wanted) if wanted else None, log_time_order=True):
-                    yield BagMessage(self._topic(channel, schema, cache), msg.data, msg.log_time)
+                    yield BagMessage(self._topic(channel, schema, cache), msg.data, msg.log_time,
+                                     msg.publish_time)
         except (McapError, EOFError, ValueError, OSError) as exc:
             raise BagError(f"{path}: unreadable MCAP ({exc})") from None
 
@@ -140,7 +146,7 @@ class BagReader:
                     if ch is None or (wanted and ch.topic not in wanted):
                         continue
                     yield BagMessage(self._topic(ch, schemas.get(ch.schema_id), cache),
-                                     rec.data, rec.log_time)
+                                     rec.data, rec.log_time, rec.publish_time)
 
     # ---- summary ------------------------------------------------------------------------
     def schemas(self) -> dict[str, str]:
@@ -180,12 +186,13 @@ def rebuild_metadata(reader: BagReader) -> BagMetadata:
             count += 1
             start = m.log_time_ns if start is None else min(start, m.log_time_ns)
             end = max(end, m.log_time_ns)
-        files.append(FileInfo(path.name, start or 0, (end - start) if start else 0, count))
+        files.append(FileInfo(path.name, start or 0, (end - start) if start is not None else 0,
+                              count))
         if start is not None:
             start_all = start if start_all is None else min(start_all, start)
             end_all = max(end_all, end)
     return BagMetadata(topics=list(topics.values()), files=files, start_ns=start_all or 0,
-                       duration_ns=(end_all - start_all) if start_all else 0)
+                       duration_ns=(end_all - start_all) if start_all is not None else 0)
 
 
 def reindex(directory: str | os.PathLike, compression: str = "zstd") -> BagMetadata:
@@ -215,7 +222,7 @@ def reindex(directory: str | os.PathLike, compression: str = "zstd") -> BagMetad
                         if t.type_hash:
                             md["topic_type_hash"] = t.type_hash
                         cids[t.name] = w.register_channel(t.name, "cdr", sids[t.type], md)
-                    w.add_message(cids[t.name], m.log_time_ns, m.data, m.log_time_ns)
+                    w.add_message(cids[t.name], m.log_time_ns, m.data, m.publish_time_ns)
                 w.add_metadata("rosbag2", {"serialized_metadata": meta.to_yaml(),
                                            "ROS_DISTRO": meta.ros_distro})
                 w.finish()

@@ -3,6 +3,10 @@
 New topics are picked up while recording (graph listener). Each subscription takes the QoS its
 publishers offer (TRANSIENT_LOCAL only when every publisher is latched, BEST_EFFORT when one is)
 with KEEP_ALL history so the node's queue never drops a sample; the writer thread does the rest.
+
+With `use_sim_time` messages are stamped (MCAP log_time, what players pace by) with the sim
+time of /clock when they are received, so a lockstep flight replays at its own pace; the
+wall-clock receive time stays in publish_time. See SimStamp for the rules.
 """
 from __future__ import annotations
 
@@ -30,18 +34,97 @@ def subscription_qos(offered: list[QoSProfile]) -> QoSProfile:
     return q
 
 
+class SimStamp:
+    """Receive times on the sim clock (/clock), for a recording on sim time.
+
+    The bag's time axis never runs backwards: when /clock restarts (a sim reset between the
+    legs of a demo) the stamps continue from the last one (the restart's 0 is the last stamp).
+    Messages that arrive before the first /clock (latched ones) wait and get its time. If no
+    /clock comes within `patience` wall seconds the recording falls back to wall-clock time."""
+
+    def __init__(self, node, write, patience: float = 60.0, max_pending: int = 100_000):
+        from roszen.node import Subscription
+        from roszen.qos import CLOCK
+        self.write = write
+        self._lock = threading.Lock()
+        self.patience = patience
+        self.max_pending = max_pending
+        self.started = time.monotonic()
+        self.offset = 0          # added to /clock: the shifts of every backwards jump
+        self.last = None         # last /clock (ns), as received
+        self.wall = False        # gave up waiting: stamps are wall-clock time
+        self.pending: list = []  # (topic, data, wall ns) received before the first /clock
+        # direct: the clock is read on arrival (zenoh's thread), as a node's own sim clock is, so
+        # a message is never stamped with a /clock older than the one published before it
+        self._sub = Subscription(node, "rosgraph_msgs/msg/Clock", "/clock", self._on_clock, CLOCK,
+                                 direct=True)
+
+    def _on_clock(self, msg) -> None:
+        t = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+        with self._lock:
+            if self.last is not None and t < self.last:   # restarted (from 0): continue
+                self.offset += self.last
+            self.last = t
+            if self.pending and not self.wall:
+                now = self.last + self.offset
+                for topic, data, wall in self.pending:
+                    self.write(topic, data, now, wall)
+                self.pending.clear()
+
+    def now(self) -> int | None:
+        """The bag time of a message received now (None: no /clock yet)."""
+        return None if self.last is None else self.last + self.offset
+
+    def stamp(self, topic: str, data: bytes) -> None:
+        wall = time.time_ns()
+        with self._lock:
+            if self.wall:
+                self.write(topic, data, wall, wall)
+            elif self.last is None:
+                self.pending.append((topic, data, wall))
+            else:
+                self.write(topic, data, self.last + self.offset, wall)
+        if self.last is None:
+            self.check()
+
+    def check(self) -> None:
+        """Fall back to wall time when /clock is overdue (or the wait would hold too much)."""
+        with self._lock:
+            if self.last is not None or self.wall or not (
+                    time.monotonic() - self.started > self.patience
+                    or len(self.pending) > self.max_pending):
+                return
+            self.wall = True
+            for topic, data, wall in self.pending:
+                self.write(topic, data, wall, wall)
+            self.pending.clear()
+        log(f"no /clock within {self.patience:g} s: recording with wall-clock time")
+
+    def close(self) -> None:
+        if self.pending:            # never saw /clock: keep the messages, on wall time
+            self.patience = -1.0
+            self.check()
+        self._sub.destroy()
+
+
 class Recorder:
-    """Records `topics` (or all, minus hidden/excluded) of `node`'s graph into `writer`."""
+    """Records `topics` (or all, minus hidden/excluded) of `node`'s graph into `writer`.
+
+    `exclude` is a regular expression, `exclude_topics` exact names (`ros2 bag record
+    --exclude-regex / --exclude-topics`); `use_sim_time` stamps with /clock (SimStamp)."""
 
     def __init__(self, node, writer: BagWriter, *, topics: list[str] | None = None,
                  regex: str | None = None, exclude: str | None = None,
-                 include_hidden: bool = False, discovery: bool = True):
+                 include_hidden: bool = False, discovery: bool = True,
+                 exclude_topics: list[str] | None = None, use_sim_time: bool = False):
         self.node = node
         self.writer = writer
         self.topics = set(topics or [])
         self.all = not topics and not regex
         self.regex = re.compile(regex) if regex else None
         self.exclude = re.compile(exclude) if exclude else None
+        self.exclude_topics = set(exclude_topics or [])
+        self.sim = SimStamp(node, writer.write) if use_sim_time else None
         self.include_hidden = include_hidden
         self.discovery = discovery
         self.subscriptions: dict[str, object] = {}
@@ -54,7 +137,7 @@ class Recorder:
         node.context.graph.add_listener(self._changed.set)
 
     def wanted(self, topic: str) -> bool:
-        if self.exclude and self.exclude.search(topic):
+        if topic in self.exclude_topics or (self.exclude and self.exclude.search(topic)):
             return False
         if topic in self.topics:
             return True
@@ -158,9 +241,13 @@ class Recorder:
 
     def _callback(self, topic: str):
         write = self.writer.write
+        sim = self.sim
 
         def on_sample(data: bytes) -> None:
-            write(topic, data, time.time_ns())
+            if sim is None:
+                write(topic, data, time.time_ns())
+            else:
+                sim.stamp(topic, data)
             self.received += 1
         return on_sample
 
@@ -178,6 +265,8 @@ class Recorder:
             if self.discovery and self._changed.is_set():
                 self._changed.clear()
                 self.discover()
+            if self.sim is not None:
+                self.sim.check()
         # samples already received but not yet dispatched belong in the bag (bounded: 2 s)
         end = time.monotonic() + 2.0
         while time.monotonic() < end and self.node.spin_once(timeout_sec=0):
@@ -185,6 +274,8 @@ class Recorder:
 
     def close(self) -> None:
         self.node.context.graph.remove_listener(self._changed.set)
+        if self.sim is not None:
+            self.sim.close()
         for sub in self.subscriptions.values():
             self.node.destroy_subscription(sub)
         for probes in self._probes.values():

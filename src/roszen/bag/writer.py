@@ -72,9 +72,14 @@ class BagWriter:
         """Declare a topic before its first message (msgdef: concatenated .msg text)."""
         self._queue.put(("topic", name, type_name, msgdef, type_hash, list(offered_qos or [])))
 
-    def write(self, topic: str, data: bytes, log_time_ns: int | None = None) -> None:
-        """Queue one serialised (CDR) message received at log_time_ns (default: now)."""
-        self._queue.put(("msg", topic, bytes(data), log_time_ns or time.time_ns()))
+    def write(self, topic: str, data: bytes, log_time_ns: int | None = None,
+              publish_time_ns: int | None = None) -> None:
+        """Queue one serialised (CDR) message received at log_time_ns (default: now; the time
+        players pace by) and publish_time_ns (default: log_time_ns; the recorder puts the
+        wall-clock receive time there when log times are sim time)."""
+        t = time.time_ns() if log_time_ns is None else log_time_ns    # 0 is a sim time
+        self._queue.put(("msg", topic, bytes(data), t, t if publish_time_ns is None
+                         else publish_time_ns))
 
     def has_topic(self, name: str) -> bool:
         return name in self._topics
@@ -103,7 +108,7 @@ class BagWriter:
     def metadata(self) -> BagMetadata:
         """metadata.yaml contents for what has been written so far."""
         start = self._start_ns or 0
-        duration = max(0, self._end_ns - start) if self._start_ns else 0
+        duration = max(0, self._end_ns - start) if self._start_ns is not None else 0
         topics = [t.info for t in self._topics.values()]
         count = sum(t.count for t in topics)
         return BagMetadata(topics=topics, start_ns=start, duration_ns=duration,
@@ -131,11 +136,11 @@ class BagWriter:
 
     def _handle(self, item) -> None:
         if item[0] == "msg":
-            _, topic, data, t = item
+            _, topic, data, t, pt = item
             entry = self._topics.get(topic)
             if entry is None:
                 return
-            self._mcap.add_message(channel_id=entry.channel_id, log_time=t, publish_time=t,
+            self._mcap.add_message(channel_id=entry.channel_id, log_time=t, publish_time=pt,
                                    data=data, sequence=entry.info.count)
             entry.info.count += 1
             self.bytes_written += len(data)

@@ -21,6 +21,12 @@ def add_parser(sub) -> None:
     rec.add_argument("-a", "--all", action="store_true", help="record every topic")
     rec.add_argument("-e", "--regex", help="record topics matching this regular expression")
     rec.add_argument("-x", "--exclude-regex", help="skip topics matching this expression")
+    rec.add_argument("--exclude-topics", nargs="+", default=[], metavar="TOPIC",
+                     help="skip these topics")
+    rec.add_argument("--use-sim-time", action="store_true",
+                     help="stamp messages with the sim time of /clock (a lockstep flight then "
+                          "replays at its own pace); the wall receive time stays in the MCAP "
+                          "publish_time")
     rec.add_argument("--include-hidden-topics", action="store_true")
     rec.add_argument("-o", "--output", help="bag directory (must not exist; default "
                      "rosbag2_<date>-<time>)")
@@ -43,7 +49,12 @@ def add_parser(sub) -> None:
     play.add_argument("-l", "--loop", action="store_true")
     play.add_argument("--topics", nargs="+", default=None, metavar="TOPIC")
     play.add_argument("--clock", nargs="?", const=40.0, default=0.0, type=positive_float,
-                      metavar="HZ", help="publish /clock at HZ (default 40) with the bag time")
+                      metavar="HZ", help="publish /clock at HZ (default 40) with the bag time "
+                      "(the recorded /clock is then not republished)")
+    play.add_argument("--exclude-topics", nargs="+", default=[], metavar="TOPIC",
+                      help="do not play these topics")
+    play.add_argument("--exclude-regex", metavar="REGEX",
+                      help="do not play topics matching this expression")
     play.add_argument("--start-offset", type=float, default=0.0,
                       help="start this many seconds into the bag")
     play.add_argument("-d", "--delay", type=float, default=0.0,
@@ -96,7 +107,8 @@ def record_cmd(args) -> int:
         except (BagError, OSError) as exc:
             raise CliError(str(exc)) from None
         recorder = Recorder(node, writer, topics=topics, regex=args.regex,
-                            exclude=args.exclude_regex,
+                            exclude=args.exclude_regex, exclude_topics=_names(args.exclude_topics),
+                            use_sim_time=args.use_sim_time,
                             include_hidden=args.include_hidden_topics,
                             discovery=not args.no_discovery)
         try:
@@ -109,6 +121,19 @@ def record_cmd(args) -> int:
     finally:
         node.destroy_node()
     return 0
+
+
+def _names(topics: list[str]) -> list[str]:
+    return [t if t.startswith("/") else "/" + t for t in topics]
+
+
+def _check_regex(rx: str | None) -> None:
+    import re
+    if rx:
+        try:
+            re.compile(rx)
+        except re.error as exc:
+            raise CliError(f"invalid regular expression '{rx}': {exc}") from None
 
 
 def _reader(path: str):
@@ -131,6 +156,7 @@ def play_cmd(args) -> int:
     except BagError as exc:
         raise CliError(str(exc)) from None
     topics = [t if t.startswith("/") else "/" + t for t in args.topics] if args.topics else None
+    _check_regex(args.exclude_regex)
     stop = _stop_event()
     from roszen.cli.common import make_node
     node = make_node("_rosbag2_player")
@@ -138,7 +164,8 @@ def play_cmd(args) -> int:
         try:
             player = Player(node, reader, rate=args.rate, loop=args.loop, topics=topics,
                             clock_hz=args.clock, start_offset=args.start_offset,
-                            delay=args.delay)
+                            delay=args.delay, exclude_topics=_names(args.exclude_topics),
+                            exclude_regex=args.exclude_regex)
             player.play(stop)
         except BagError as exc:
             raise CliError(str(exc)) from None
