@@ -31,6 +31,7 @@ from astrobee import msgconv as mc
 from astrobee import rotations as rot
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup import summary as sm
+from astrobee_bringup.peers import PeerLost, PeerWatch
 
 IDLE, STOPPED, STOPPING, CONTROLLING = (mc.MotionState.IDLE, mc.MotionState.STOPPED,
                                         mc.MotionState.STOPPING, mc.MotionState.CONTROLLING)
@@ -224,6 +225,8 @@ class MissionClient:
         self.log = node.get_logger()
         self.ns = namespace.strip("/")
         self.stop_flag = stop_flag or (lambda: False)
+        # the simulator leaving the graph (killed, even -9) ends the wait at once, named
+        self.peers = PeerWatch(node, nodes=["sim_node"])
         self.latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
         self.deep_latched = QoSProfile(depth=50, durability=Durability.TRANSIENT_LOCAL)
         self.watches: dict[str, RobotWatch] = {}
@@ -295,9 +298,23 @@ class MissionClient:
             if time.monotonic() > deadline:
                 raise MissionError(f"timed out after {wall_timeout:.0f} s waiting for "
                                    f"{what() if callable(what) else what}")
+            self._check_peers()
             self.node.spin_once(timeout_sec=0.05)
             if tick:
                 tick()
+
+    def _check_peers(self) -> None:
+        """MissionError("lost node sim_node") once a required node has left the graph; a
+        Ctrl-C that stops the whole launch (the sim with it) stays an interruption."""
+        try:
+            self.peers.check()
+        except PeerLost as exc:
+            end = time.monotonic() + 0.5
+            while time.monotonic() < end:
+                if self.stop_flag():
+                    raise Interrupted() from None
+                time.sleep(0.05)
+            raise MissionError(str(exc)) from None
 
     def call(self, client: Any, req: Any, timeout: float, what: str) -> Any:
         if not client.wait_for_service(timeout_sec=timeout):
