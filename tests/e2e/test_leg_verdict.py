@@ -96,3 +96,25 @@ def test_plot_of_a_failed_two_robot_leg(tmp_path):
     assert sm._unit(0.0025) == (1000.0, "mm") and sm._unit(0.5) == (1.0, "m")
     labels = [n for n, _, _ in sm._module_labels((1, 0), np.array([10, -7, 4]), np.array([12, 1, 6]))]
     assert "JEM" in labels and "node 2" in labels and "node 1" not in labels
+
+
+def test_launch_starts_a_controller_and_filter_per_robot_in_its_namespace(tmp_path):
+    """No process: the launch description of two_robots_bag with safety:=true lists one
+    controller and one safety filter per robot, each in the robot's namespace, the controller's
+    command remapped (relative, so inside the namespace), each with half the bag's mass."""
+    from astrobee_bringup.launch import cargo_transport
+    from astrobee_bringup.launcher import LaunchContext, Launcher, find_config_dir
+    ctx = LaunchContext({"scenario": "two_robots_bag", "safety": "true", "controller": "mpc"},
+                        find_config_dir(), tmp_path, False, 7447)
+    specs = {s.name: s for s in cargo_transport.generate_nodes(ctx)}
+    for name, ns in (("", ""), ("bumble/", "bumble")):
+        ctl, safe = specs[f"{name}mpc_controller_node"], specs[f"{name}safety_filter_node"]
+        assert ctl.namespace == ns and safe.namespace == ns and not ctl.required
+        assert ctl.ros_args == ["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"]
+        assert {"use_sim_time": True, "bag_mass": 5.0} in ctl.parameters
+        argv = Launcher(list(specs.values()), astrobee_cmd=["astrobee"]).argv_for(ctl)
+        assert (f"__ns:={ns}" in argv) == bool(ns)
+    one = LaunchContext({"scenario": "node2_to_jem_bag"}, find_config_dir(), tmp_path, False, 7447)
+    ctls = [s for s in cargo_transport.generate_nodes(one) if s.name.endswith("controller_node")]
+    assert [(s.name, s.namespace) for s in ctls] == [("pd_controller_node", "")]
+    assert all("bag_mass" not in p for p in ctls[0].parameters if isinstance(p, dict))
