@@ -126,14 +126,20 @@ class RealismEffects:
         sigma = self.realism.actuation_noise
         if sigma:
             block = steps // self.hold
-            cached = self._noise.get(robot)
+            cached = self._noise.get(robot)     # (block, command, mode, factor, noisy target)
             if cached is None or cached[0] != block:
                 f = 1.0 + sigma * _rng(self.seed, _ACT, self.index[robot], block).normal(0.0, 1.0, 6)
-                cached = self._noise[robot] = (block, f)
-            lim = np.concatenate([r.mode.max_force, r.mode.max_torque])
-            target = np.clip(target * cached[1], -lim, lim)
+                cached = (block, None, None, f, None)
+            if cached[1] is not target or cached[2] is not r.mode:    # a new command or mode
+                lim = np.concatenate([r.mode.max_force, r.mode.max_torque])
+                cached = (block, target, r.mode, cached[3], np.clip(target * cached[3], -lim, lim))
+            self._noise[robot] = cached
+            target = cached[4]
         a = self.applied[robot]
-        a += self.alpha * (target - a)
+        if self.alpha == 1.0:                   # no lag: the (noisy, clipped) command exactly
+            a[...] = target
+        else:
+            a += self.alpha * (target - a)
         return a
 
     # ---- stepping -----------------------------------------------------------------------
