@@ -11,11 +11,15 @@ import time
 from pathlib import Path
 
 
+# not benchmarks: train_residual.py trains a policy for minutes (optional [rl] extra)
+SKIP = {"run_all.py", "train_residual.py"}
+
+
 def main() -> int:
     here = Path(__file__).resolve().parent
     failed = []
     for script in sorted(here.glob("*.py")):
-        if script.name == "run_all.py" or script.name.startswith("_"):
+        if script.name in SKIP or script.name.startswith("_"):
             continue
         print(f"\n=== {script.name} ===", flush=True)
         t0 = time.monotonic()

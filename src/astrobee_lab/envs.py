@@ -145,8 +145,9 @@ class AstrobeeCargoEnv(gym.Env):
         return self._vector(obs), reward, bool(m.terminated), bool(m.truncated), self._info()
 
     def _info(self) -> dict[str, Any]:
+        """t, success and cause (the Task's verdict, at the episode's end only), contacts, seed."""
         m = self.flight.monitor
-        ok, cause = m.verdict()
+        ok, cause = m.verdict() if m.terminated or m.truncated else (False, "")
         return {"t": self.flight.sim.time, "success": ok and m.goal_reached, "cause": cause,
                 "contacts": m.contact_samples, "seed": self.flight.seed}
 
@@ -162,10 +163,11 @@ class AstrobeeCargoEnv(gym.Env):
                  st.velocity, q, st.omega, ref.position - st.position, ref.velocity,
                  rot.attitude_error(q, ref.orientation), r.nominal / self._limits_safe]
         bag = obs.bag
+        r_wb = rot.to_matrix(q)                       # body -> world, once per tick
         if bag is not None and bool(np.any(np.asarray(bag.attached, bool))):
             qb = rot.normalize(np.asarray(bag.orientation, float))
-            parts += [rot.rotate_inverse(q, np.asarray(bag.position) - st.position),
-                      rot.rotate_inverse(q, np.asarray(bag.velocity) - st.velocity),
+            parts += [(np.asarray(bag.position) - st.position) @ r_wb,
+                      (np.asarray(bag.velocity) - st.velocity) @ r_wb,
                       rot.multiply(rot.conjugate(q), qb), [1.0]]
         else:
             parts += [np.zeros(3), np.zeros(3), [0.0, 0.0, 0.0, 1.0], [0.0]]
@@ -176,7 +178,7 @@ class AstrobeeCargoEnv(gym.Env):
         if self.n_nodes:
             pts = self.flight.sim.bag_points()
             if pts is not None and len(pts) == self.n_nodes:
-                rel = (np.asarray(pts, float) - st.position) @ rot.to_matrix(q)   # body frame
+                rel = (np.asarray(pts, float) - st.position) @ r_wb     # body frame
                 out[OBS_SIZE:] = rel.ravel()
         return np.clip(out, -OBS_BOUND, OBS_BOUND).astype(np.float32)
 
