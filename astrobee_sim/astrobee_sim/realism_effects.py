@@ -67,7 +67,7 @@ class RealismEffects:
             g = _rng(self.seed, _BIAS, i)
             self.bias[n] = (g.normal(0.0, 1.0, 3) * r.ekf_position_bias,
                             g.normal(0.0, 1.0, 3) * r.ekf_attitude_bias)
-        self.applied = {n: np.zeros(6) for n in self.names}
+        self._applied = {n: [0.0] * 6 for n in self.names}   # plain floats: runs every step
         self._noise: dict[str, tuple[int, np.ndarray]] = {}
         self.pulses = self._schedule(has_bag, bag_solver)
         self.log: list[dict] = []
@@ -120,7 +120,12 @@ class RealismEffects:
         return pos, q, v, w
 
     # ---- actuation ----------------------------------------------------------------------
-    def wrench(self, robot: str, r: Any, steps: int) -> np.ndarray:
+    @property
+    def applied(self) -> dict[str, np.ndarray]:
+        """Each robot's wrench applied over the last step (body frame [f, tau])."""
+        return {n: np.array(a) for n, a in self._applied.items()}
+
+    def wrench(self, robot: str, r: Any, steps: int) -> list[float]:
         """The wrench applied over physics step `steps`: noisy, clipped, lagged command."""
         target = r.wrench_cmd
         sigma = self.realism.actuation_noise
@@ -132,14 +137,17 @@ class RealismEffects:
                 cached = (block, None, None, f, None)
             if cached[1] is not target or cached[2] is not r.mode:    # a new command or mode
                 lim = np.concatenate([r.mode.max_force, r.mode.max_torque])
-                cached = (block, target, r.mode, cached[3], np.clip(target * cached[3], -lim, lim))
+                cached = (block, target, r.mode, cached[3],
+                          np.clip(target * cached[3], -lim, lim).tolist())
             self._noise[robot] = cached
-            target = cached[4]
-        a = self.applied[robot]
-        if self.alpha == 1.0:                   # no lag: the (noisy, clipped) command exactly
-            a[...] = target
+            t = cached[4]
         else:
-            a += self.alpha * (target - a)
+            t = r._force + r._torque             # the held command as floats (robot.py)
+        if self.alpha == 1.0:                   # no lag: the (noisy, clipped) command exactly
+            a = self._applied[robot] = list(t)
+        else:
+            al = self.alpha
+            a = self._applied[robot] = [x + al * (y - x) for x, y in zip(self._applied[robot], t)]
         return a
 
     # ---- stepping -----------------------------------------------------------------------
@@ -159,10 +167,10 @@ class RealismEffects:
                 elif fault[name]:
                     fault[name] = False
                 w = self.wrench(name, r, k)
-                if w.any():
-                    p.applyExternalForce(r.id, -1, w[:3].tolist(), r._com_in_base, p.LINK_FRAME,
+                if any(w):
+                    p.applyExternalForce(r.id, -1, w[:3], r._com_in_base, p.LINK_FRAME,
                                          physicsClientId=c)
-                    p.applyExternalTorque(r.id, -1, w[3:].tolist(), p.LINK_FRAME, physicsClientId=c)
+                    p.applyExternalTorque(r.id, -1, w[3:], p.LINK_FRAME, physicsClientId=c)
                 if r.drag:
                     r.apply(zero=True)
             gravity = self._pulses(sim, k)
@@ -236,10 +244,10 @@ class RealismEffects:
 
     # ---- snapshot -----------------------------------------------------------------------
     def snapshot(self) -> dict:
-        return {"applied": {n: a.copy() for n, a in self.applied.items()}, "log": len(self.log)}
+        return {"applied": {n: list(a) for n, a in self._applied.items()}, "log": len(self.log)}
 
     def restore(self, snap: dict) -> None:
         for n, a in snap["applied"].items():
-            self.applied[n][...] = a
+            self._applied[n] = list(a)
         del self.log[snap["log"]:]
         self._noise.clear()
