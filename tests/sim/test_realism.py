@@ -314,3 +314,20 @@ def test_bad_realism_launch_argument_is_one_line_and_starts_nothing(tmp_path):
                        cwd=tmp_path)
     assert r.returncode != 0 and "unknown realism preset 'calm'" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "runs").exists()
+
+
+def test_controller_takes_a_told_mass_of_zero_as_no_bag_mass():
+    """controller_node's CarriedBag reads /sim/scenario's bag_mass: 0 (bag_mass_told 0) is
+    accepted and the law then carries no bag mass (law.carried_mass)."""
+    from types import SimpleNamespace
+
+    from astrobee_control.controller_node import CarriedBag
+    size = SimpleNamespace(x=0.5, y=0.42, z=0.25)
+    bag = CarriedBag(0.0, [])
+    bag.on_scenario(SimpleNamespace(carrying_bag=True, bag_mass=0.0, bag_size=size))
+    mass, _ = bag.figures()
+    assert mass == 0.0
+    bag.on_scenario(SimpleNamespace(carrying_bag=True, bag_mass=5.0, bag_size=size))
+    assert bag.figures()[0] == 5.0
+    with pytest.raises(ValueError):
+        bag.on_scenario(SimpleNamespace(carrying_bag=True, bag_mass=-1.0, bag_size=size))
