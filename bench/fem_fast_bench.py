@@ -10,12 +10,8 @@ Targets (issue 12): ~400 nodes >= 3x real time (goal 10x), ~1500 nodes >= 1x.
 from __future__ import annotations
 
 import argparse
-import time
 
-import numpy as np
-
-from astrobee_sim.bags.fem_rollout import FemRollout
-from astrobee_sim.simulation import Simulation
+from sim_rtf import batched_rtf as batched
 from sim_rtf import library_rtf as sim_rtf_library
 
 
@@ -23,22 +19,6 @@ def library_rtf(solver: str, res: int, seconds: float) -> tuple[float, int]:
     """sim_rtf's library loop with the FEM bag on `solver`: (real-time factor, nodes)."""
     wall, _, nodes = sim_rtf_library("fem", res, seconds, fem_solver=solver)
     return wall, nodes
-
-
-def batched(res: int, k: int, seconds: float) -> tuple[float, int]:
-    """Bag-seconds per wall second of K copies stepped together (each copy its own wrench)."""
-    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=res, fem_solver="fast")
-    try:
-        ro = FemRollout.from_bag(sim.bag, sim.robots[""], k, sim.dt)
-        rng = np.random.default_rng(0)
-        wr = np.c_[rng.uniform(-0.5, 0.5, (k, 3)), rng.uniform(-0.05, 0.05, (k, 3))]
-        ro.step(wr, 1)                                   # factor outside the timing
-        steps = max(1, int(round(seconds / sim.dt)))
-        t0 = time.perf_counter()
-        ro.step(wr, steps)
-        return k * steps * sim.dt / (time.perf_counter() - t0), sim.bag.num_nodes
-    finally:
-        sim.close()
 
 
 def main() -> None:

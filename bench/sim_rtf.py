@@ -1,14 +1,22 @@
 """Real-time factor of the simulator while the robot drives the bag, per bag model.
 
-Three figures per row: the Simulation loop (physics + the per-tick state queries sim_node makes),
-the whole sim_node process in lockstep with this process as the controller over the ROS 2 wire
-(publishing every topic, one command per tick, router in between: the round trip counts), and
-sim_node in fast clock mode (no waiting: its own throughput, publishing included).
+Table 1, three figures per row: the Simulation loop (physics + the per-tick state queries
+sim_node makes), the whole sim_node process in lockstep with this process as the controller over
+the ROS 2 wire (publishing every topic, one command per tick, router in between: the round trip
+counts), and sim_node in fast clock mode (no waiting: its own throughput, publishing included).
+The FEM bag on the fast solver (the default) and on Bullet's (the reference), same run.
+
+Table 2 (issue 12 / 11): the whole graph as `astrobee launch cargo_transport` starts it (router,
+sim_node in lockstep, planner, the PD or MPC controller process, mission; no recorder) flying
+Node 2 -> JEM with the FEM bag: the mission's real-time factor over the 44 s flight. Bullet's
+solver in the same run as the reference. And K=64 batched copies of the fast FEM bag + robot
+(fem_rollout) in bag-seconds per wall second.
 Reference: pyastrobee 0.6x real time at 379 FEM nodes (FACTS.md section 6).
-Targets: >= 3x at ~400 nodes on one core, >= 50x for the reduced models.
+Targets: >= 3x at ~400 nodes (goal 10x), >= 1x at ~1500 nodes, >= 50x for the reduced
+models, MPC in the loop with the FEM bag >= 1x.
 
     .venv/bin/python bench/sim_rtf.py            # --quick (default): a few simulated seconds
-    .venv/bin/python bench/sim_rtf.py --full     # longer runs
+    .venv/bin/python bench/sim_rtf.py --full     # longer runs, the 1500-node graph row
 """
 from __future__ import annotations
 
@@ -21,11 +29,19 @@ from astrobee import rotations as rot
 from astrobee_sim.robot import qrot
 from astrobee_sim.simulation import Simulation
 
-CASES = [("fem", 400), ("fem", 1000), ("constraint", 0), ("composite", 0), ("rigid", 0)]
+# (model, FEM nodes, FEM solver): fast is the default solver, bullet the reference
+CASES = [("fem", 400, "fast"), ("fem", 400, "bullet"), ("fem", 1500, "fast"), ("fem", 1500, "bullet"),
+         ("constraint", 0, ""), ("composite", 0, ""), ("rigid", 0, "")]
 TARGET = {"fem": 3.0, "constraint": 50.0, "composite": 50.0, "rigid": 50.0}
+TARGET_FEM_1500 = 1.0
 # round one's figures on this machine (Simulation wall / sim_node wall), before the overhead cuts
-ROUND1 = {("fem", 400): (1.1, 0.8), ("fem", 1000): (0.4, float("nan")), ("constraint", 0): (32.9, 11.8),
-          ("composite", 0): (4.0, 3.6), ("rigid", 0): (36.7, 13.5)}
+# (Bullet's FEM bag then)
+ROUND1 = {("fem", 400, "bullet"): (1.1, 0.8), ("constraint", 0, ""): (32.9, 11.8),
+          ("composite", 0, ""): (4.0, 3.6), ("rigid", 0, ""): (36.7, 13.5)}
+# the graph rows: (controller, FEM nodes, solver, target); --full adds the 1500-node ones
+GRAPH = [("pd", 400, "fast", "3x (goal 10x)"), ("pd", 400, "bullet", "reference"),
+         ("mpc", 400, "fast", "1x")]
+GRAPH_FULL = [("pd", 1500, "fast", "1x"), ("pd", 1500, "bullet", "reference")]
 
 
 def pd_wrench(pos, q, v, w, goal, q_goal):
@@ -83,7 +99,8 @@ def library_rtf(model: str, res: int, seconds: float, fem_solver: str | None = N
         sim.close()
 
 
-def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep") -> tuple[float, float]:
+def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep",
+             fem_solver: str = "") -> tuple[float, float]:
     """sim_node with this process closing the loop over the ROS 2 wire: in lockstep (the sim
     waits for each tick's command: the round trip counts) or fast (no waiting: the sim's own
     throughput with every topic published; commands then arrive a few ticks late)."""
@@ -96,6 +113,8 @@ def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep") -> tu
                 "-p", f"max_sim_time:={seconds + 1.0}"]
         if res:
             args += ["-p", f"bag_resolution:={res}"]
+        if fem_solver:
+            args += ["-p", f"fem_solver:={fem_solver}"]
         proc = testing.spawn(testing.python_cmd(*args), env)
         ctx = roszen.Context(env=env)
         node = roszen.Node("sim_rtf_bench", context=ctx)
@@ -145,34 +164,90 @@ def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep") -> tu
             testing.stop(proc)
 
 
+def graph_rtf(controller: str, res: int, solver: str, timeout: float = 900.0) -> tuple[float, str]:
+    """The whole cargo_transport graph (lockstep, no recorder) flying node2_to_jem with the FEM
+    bag: (the mission's real-time factor over the flight, its verdict)."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+    from roszen import testing
+    with tempfile.TemporaryDirectory(prefix="sim_rtf_graph_") as run:
+        cmd = [sys.executable, "-m", "astrobee_bringup.cli", "launch", "cargo_transport",
+               "--port", str(testing.free_port()), "--run-dir", run,
+               "scenario:=node2_to_jem_bag", "bag_model:=fem", f"bag_resolution:={res}",
+               f"fem_solver:={solver}", f"controller:={controller}", "record:=false", "video:=false"]
+        try:
+            subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=timeout)
+            leg = json.load(open(f"{run}/summary.json"))["legs"][0]
+        except (subprocess.TimeoutExpired, OSError, ValueError, KeyError, IndexError) as exc:
+            return float("nan"), f"no result ({type(exc).__name__})"
+        return float(leg.get("real_time_factor") or float("nan")), str(leg.get("reason", ""))
+
+
+def batched_rtf(res: int, k: int, seconds: float) -> tuple[float, int]:
+    """Bag-seconds per wall second of K copies of robot + fast FEM bag stepped together."""
+    from astrobee_sim.bags.fem_rollout import FemRollout
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=res, fem_solver="fast")
+    try:
+        ro = FemRollout.from_bag(sim.bag, sim.robots[""], k, sim.dt)
+        rng = np.random.default_rng(0)
+        wr = np.c_[rng.uniform(-0.5, 0.5, (k, 3)), rng.uniform(-0.05, 0.05, (k, 3))]
+        ro.step(wr, 1)                                   # factor outside the timing
+        steps = max(1, int(round(seconds / sim.dt)))
+        t0 = time.perf_counter()
+        ro.step(wr, steps)
+        return k * steps * sim.dt / (time.perf_counter() - t0), sim.bag.num_nodes
+    finally:
+        sim.close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", default=True)
     ap.add_argument("--full", action="store_true")
-    ap.add_argument("--no-node", action="store_true", help="skip the sim_node (process) column")
+    ap.add_argument("--no-node", action="store_true", help="skip the sim_node (process) columns")
+    ap.add_argument("--no-graph", action="store_true", help="skip the whole-graph rows")
     a = ap.parse_args()
-    secs = {("fem", 400): 3.0, ("fem", 1000): 1.5}
+    secs = {("fem", 400): 3.0, ("fem", 1500): 1.5}
     scale = 5.0 if a.full else 1.0
     rows = []
-    for model, res in CASES:
+    for model, res, solver in CASES:
         s = secs.get((model, res), 10.0) * scale
-        lib_wall, lib_cpu, nodes = library_rtf(model, res, s)
-        nd_wall, nd_cpu = (float("nan"),) * 2 if a.no_node else node_rtf(model, res, s)
-        fast_wall, fast_cpu = (float("nan"),) * 2 if a.no_node else node_rtf(model, res, s, "fast")
-        rows.append((model, nodes, s, lib_wall, lib_cpu, nd_wall, nd_cpu, fast_wall, fast_cpu))
+        if solver == "bullet" and res > 1000:
+            s /= 3.0                                    # 0.3x real time: keep it short
+        lib_wall, lib_cpu, nodes = library_rtf(model, res, s, fem_solver=solver or None)
+        nd_wall, nd_cpu = (float("nan"),) * 2 if a.no_node else node_rtf(model, res, s, fem_solver=solver)
+        fast_wall, fast_cpu = ((float("nan"),) * 2 if a.no_node
+                               else node_rtf(model, res, s, "fast", fem_solver=solver))
+        rows.append((model, nodes, solver, s, lib_wall, lib_cpu, nd_wall, nd_cpu, fast_wall, fast_cpu))
     print("\nsim real-time factor while a PD law drags the bag (350 Hz physics, 62.5 Hz ticks)")
     print("wall = elapsed time on this (shared, 2-core) machine; cpu = per CPU-second of the sim "
           "process (the 'one core' figure); sim_node = lockstep with this process as the controller "
           "over the wire (includes the round trip per tick); fast = sim_node in fast clock mode "
           "(no waiting), same controller")
-    print(f"{'model':<11}{'nodes':>6}{'sim s':>6}{'Simulation wall':>16}{'cpu':>7}"
+    print(f"{'model':<11}{'nodes':>6}{'solver':>7}{'sim s':>6}{'Simulation wall':>16}{'cpu':>7}"
           f"{'lockstep wall':>14}{'cpu':>7}{'fast wall':>10}{'cpu':>7}{'target':>8}"
           f"{'round 1 (lib/lockstep)':>24}  reference (pyastrobee)")
-    for (model, nodes, s, lw, lc, nw, nc, fw, fc), case in zip(rows, CASES):
+    for (model, nodes, solver, s, lw, lc, nw, nc, fw, fc), case in zip(rows, CASES):
         ref = "0.6x at 379 nodes" if model == "fem" else "-"
         r1 = ROUND1.get(case, (float("nan"),) * 2)
-        print(f"{model:<11}{nodes or '-':>6}{s:>6.1f}{lw:>15.1f}x{lc:>6.1f}x{nw:>13.1f}x{nc:>6.1f}x"
-              f"{fw:>9.1f}x{fc:>6.1f}x{TARGET[model]:>7.0f}x{r1[0]:>16.1f}x /{r1[1]:>5.1f}x  {ref}")
+        target = TARGET_FEM_1500 if model == "fem" and nodes > 1000 else TARGET[model]
+        target_s = f"{target:.0f}x" if solver != "bullet" else "ref"
+        print(f"{model:<11}{nodes or '-':>6}{solver or '-':>7}{s:>6.1f}{lw:>15.1f}x{lc:>6.1f}x"
+              f"{nw:>13.1f}x{nc:>6.1f}x{fw:>9.1f}x{fc:>6.1f}x{target_s:>8}"
+              f"{r1[0]:>16.1f}x /{r1[1]:>5.1f}x  {ref}")
+    if a.no_graph:
+        return
+    graph = [(c, r, sv, tg, *graph_rtf(c, r, sv)) for c, r, sv, tg in GRAPH + (GRAPH_FULL if a.full else [])]
+    k64, n64 = batched_rtf(400, 64, 0.15 * scale)
+    print("\nthe whole graph (astrobee launch cargo_transport, lockstep, no recorder) flying "
+          "Node 2 -> JEM (44 s) with the FEM bag: the mission's real-time factor")
+    print(f"{'controller':<11}{'nodes':>6}{'solver':>8}{'real time':>11}  {'target':<16}verdict")
+    for c, r, sv, tg, rtf, why in graph:
+        print(f"{c:<11}{r:>6}{sv:>8}{rtf:>10.1f}x  {tg:<16}{why}")
+    print(f"\nbatched fast FEM bag, K=64 copies + robot, {n64} nodes: {k64:.1f} bag-s per wall s "
+          f"(rollouts; Bullet: one process per copy)")
 
 
 if __name__ == "__main__":
