@@ -215,7 +215,7 @@ class MpcLaw:
         t_end = min(now + c.horizon, nom.end_time)
         T = t_end - now
         m = int(math.ceil(T / c.rollout_dt))
-        if m < 2:
+        if m < max(2, c.cost_stride):     # fewer steps than one clearance check: nothing to score
             return None
         dt_r = T / m
         scale = float(np.clip((nom.end_time - t_end) / c.horizon, 0.0, 1.0))
