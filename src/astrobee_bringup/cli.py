@@ -20,6 +20,7 @@ commands:
   router [--port P]              run the Zenoh router (rmw_zenohd equivalent)
   topic | service | node | param | interface | bag   ros2-style verbs (`astrobee topic -h`)
   bag render BAG -o flight.mp4   render a recorded run to MP4/GIF, headless
+  study run FILE | report DIR | reflow DIR ROW   Monte Carlo studies (`astrobee study -h`)
 """
 
 
@@ -100,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         except KeyboardInterrupt:      # Ctrl-C before the launcher took over the signals
             return 130
+    if argv[0] == "study":
+        from astrobee_lab.study_cli import main as study_main
+        return study_main(argv[1:])
     if argv[:2] == ["bag", "render"]:
         from astrobee_bringup import render_bag
         return render_bag.main(argv[2:])
