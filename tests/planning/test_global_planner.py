@@ -214,3 +214,38 @@ def test_block_sampling_matches_each_piece_with_rates(safe):
         np.testing.assert_allclose(st.pos[i], bezier.evaluate(p.points, [s])[0], atol=1e-9)
     srt = tr.sample_rate(50.0)
     assert np.all(np.sum(srt.quat[1:] * srt.quat[:-1], axis=1) > 0.99)
+
+
+@pytest.mark.parametrize("a,b", [("node_2", "jem"), ("jem", "cupola")])
+def test_banded_solver_matches_clarabel(a, b, safe):
+    """The banded interior-point solve of the spline QP gives Clarabel's optimum (objective
+    within 1e-8, equalities to 1e-9, inside the boxes) for the same durations."""
+    import scipy.sparse as sp
+    from astrobee_planning import global_planner as gp
+    start, goal = WPS[a], WPS[b]
+    route = safe.route(start, goal)
+    rb = safe.boxes[route]
+    poly = gp.reference_polyline(rb, start, goal)
+    _, leg_of, T, track = gp.profile_segments(poly, gp.corner_speeds(poly, 0.2, 0.0175), 0.2, 0.0175,
+                                              0.2 * gp.DV_FRACTION, gp.MAX_LEG)
+    rb = rb[leg_of]
+    bc = np.stack([start, np.zeros(3), np.zeros(3), goal, np.zeros(3), np.zeros(3)], axis=1)
+    banded = gp.SplineQP(rb[:, :3], rb[:, 3:], gp.DEGREE, gp.CONTINUITY, track, gp.TRACK_WEIGHT)
+    ref = gp.SplineQP(rb[:, :3], rb[:, 3:], gp.DEGREE, gp.CONTINUITY, track, gp.TRACK_WEIGHT)
+    ref._solve_banded = lambda *args, **kw: None
+    for Ts in (T, T * np.linspace(0.7, 1.6, len(T))):
+        xb, xc = banded.solve(Ts, bc), ref.solve(Ts, bc)
+        assert banded.fallbacks == 0 and ref.fallbacks > 0
+        tm = float(np.mean(Ts))
+        P = banded._p.copy()
+        P.data = banded._p_base * (tm / Ts[banded._p_seg]) ** 5 + banded._p_diag_track
+        P = P + sp.triu(P, 1).T
+        A = banded._a.copy()
+        A.data = banded._base * banded._scales(Ts)[banded._scl]
+        A = A.toarray()[:banded.n_eq]
+        beq = banded._b(Ts, bc)[:banded.n_eq]
+        f = lambda x: 0.5 * x @ (P @ x) + banded._q @ x  # noqa: E731
+        vb, vc = (x.transpose(2, 0, 1).reshape(-1) for x in (xb, xc))
+        assert f(vb) <= f(vc) + 1e-8 * abs(f(vc))
+        assert np.abs(A @ vb - beq).max() <= 1e-9 * max(1.0, np.abs(beq).max())
+        assert np.all(xb >= rb[:, None, :3]) and np.all(xb <= rb[:, None, 3:])
