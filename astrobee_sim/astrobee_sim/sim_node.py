@@ -50,6 +50,7 @@ from astrobee import scenario as scn  # noqa: E402
 from astrobee.realism import Disturbance, Realism  # noqa: E402
 from astrobee.scenario import Scenario, ScenarioError  # noqa: E402
 
+from . import markers  # noqa: E402
 from .backend import BACKENDS, SimBackend, make_backend  # noqa: E402
 from .robot import qrot  # noqa: E402
 from .simulation import sim_defaults  # noqa: E402
@@ -58,6 +59,8 @@ FAULT_WATCHDOG = 1
 CLOCK_MODES = ("realtime", "fast", "lockstep")
 MAX_CONTROL_STEPS = 100_000     # one /sim/control STEP request (~5 min of sim at 350 Hz)
 MAX_REPLY = 400                 # characters of a refused request echoed in a reply
+BAG_MARKER = "/sim/bag/marker"   # visualization_msgs/Marker TRIANGLE_LIST: the cargo bag's surface
+ROBOT_MARKERS = "/sim/robot_markers"   # latched MarkerArray: each robot's boxes in its body frame
 SIM_REALISM = "/sim/realism"    # latched std_msgs/String: the realism in effect, pulses applied
 REALISM_SCALARS = ("ekf_position_noise", "ekf_attitude_noise", "ekf_velocity_noise",
                    "ekf_omega_noise", "ekf_position_bias", "ekf_attitude_bias", "actuation_noise",
@@ -274,6 +277,16 @@ class SimNode:
         self.pub_markers = n.create_publisher("visualization_msgs/msg/MarkerArray", mc.MARKERS, LATCHED)
         self.pub_scenario = n.create_publisher("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO, LATCHED)
         self.pub_realism = n.create_publisher("std_msgs/msg/String", SIM_REALISM, LATCHED)
+        # standard types any viewer shows (markers.py): the cargo bag's surface at the mesh
+        # rate, the robot's URDF and boxes in its body frame (latched)
+        self.pub_bag_marker = n.create_publisher("visualization_msgs/msg/Marker", BAG_MARKER, 2)
+        self.pub_robot_description = n.create_publisher("std_msgs/msg/String",
+                                                        "/robot_description", LATCHED)
+        self.pub_robot_markers = n.create_publisher("visualization_msgs/msg/MarkerArray",
+                                                    ROBOT_MARKERS, LATCHED)
+        self.bag_surface = markers.BagSurface(M("visualization_msgs/msg/Marker"),
+                                              M("geometry_msgs/msg/Point"))
+        self._marker_cdr = roszen.codec.msg_support("visualization_msgs/msg/Marker").serialize
         self._realism_applied = -1      # pulses in the last /sim/realism
         self._ekf_state = getattr(backend, "ekf_state", backend.robot_state)
         self.robot_io: dict[str, dict] = {}
@@ -534,6 +547,8 @@ class SimNode:
                 mm.num_nodes = len(pts)
                 mm.positions = np.asarray(pts, np.float32).reshape(-1)
                 self.pub_mesh.publish(mm)
+                self.pub_bag_marker.publish(self.bag_surface.payload(        # CDR bytes
+                    getattr(self.sim, "bag", None), pts, bs.header, self._marker_cdr))
         tf = g["tf"]
         tf.transforms = transforms
         self.pub_tf.publish(tf)
@@ -651,6 +666,13 @@ class SimNode:
             out.append(m)
         arr.markers = out
         self.pub_markers.publish(arr)
+        robots = M["markers"]()             # robot boxes in each body frame (TF)
+        robots.markers = [m for k, name in enumerate(self.names) for m in markers.robot_markers(
+            M["marker"], f"{name}/body" if name else "body", 3 * k)]
+        self.pub_robot_markers.publish(robots)
+        desc = M["string"]()
+        desc.data = markers.robot_description()
+        self.pub_robot_description.publish(desc)
 
     # ---- main loop ---------------------------------------------------------------------
     def _drain(self, timeout: float = 0.0) -> None:
