@@ -69,6 +69,8 @@ def main() -> int:
     except ImportError:
         print("train_residual: stable-baselines3 is not installed (pip install -e .[rl]); skipped")
         return 0
+    import torch
+    torch.set_num_threads(1)      # the envs need the cores; the MLP is small
     seeds = list(range(10_000, 10_000 + a.episodes))
     env = make_env(a.bag, a.realism)
     t0 = time.perf_counter()

@@ -81,6 +81,8 @@ class Task:
     tolerance_attitude: float
     time_limit: float = 300.0              # sim s from the first sample
     end_on_contact: bool = False           # an episode ends at the first contact (RL)
+    rest_speed: float = REST_SPEED         # m/s and rad/s under which a robot in tolerance
+    rest_omega: float = REST_OMEGA         # is "at rest": the goal is reached
     weights: RewardWeights = field(default_factory=RewardWeights)
     name: str = ""
 
@@ -178,8 +180,8 @@ class TaskMonitor:
         if s.velocities is not None:
             for name in self.task.goals:
                 v = s.velocities.get(name)
-                if v is None or not (np.linalg.norm(v[0]) < REST_SPEED
-                                     and np.linalg.norm(v[1]) < REST_OMEGA):
+                if v is None or not (np.linalg.norm(v[0]) < self.task.rest_speed
+                                     and np.linalg.norm(v[1]) < self.task.rest_omega):
                     rest = False
         else:
             rest = False
