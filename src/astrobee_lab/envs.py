@@ -92,6 +92,9 @@ class AstrobeeCargoEnv(gym.Env):
                              bag_resolution=bag_resolution, bag_mass=bag_mass, fem_solver=fem_solver,
                              flight_mode=flight_mode, realism=realism, task=task)
         self.base = self.flight.scenario
+        if len(self.flight.names) != 1:
+            raise ValueError("AstrobeeCargo-v0 flies one robot; the scenario has "
+                             f"{len(self.flight.names)}")
         self.action_mode = action_mode
         self.residual_scale = float(residual_scale)
         self.random_start_goal = bool(random_start_goal)

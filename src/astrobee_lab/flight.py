@@ -104,8 +104,9 @@ def make_controller(controller: str | Any, flight_mode, params: dict | None = No
 
 
 class Flight:
-    """One leg in-process (see the module docstring). Single robot for now: a scenario with two
-    robots raises ValueError (the formation planner is not wired in yet)."""
+    """One leg in-process (see the module docstring): one robot, or two holding one bag (one law
+    each, the formation planner's references; each law told the whole bag, as each controller
+    node is on the graph)."""
 
     def __init__(self, scenario: str | Scenario = "node2_to_jem_bag", seed: int = 0,
                  controller: str | Any = "pd", safety: bool = False, *,
@@ -135,9 +136,9 @@ class Flight:
             self.scenario = Scenario.load(scenario, **given)
         else:
             raise ValueError(f"scenario must be a name or a Scenario, got {type(scenario).__name__}")
-        if len(self.scenario.robots) != 1:
+        if len(self.scenario.robots) not in (1, 2):
             raise ValueError(f"scenario {self.scenario.name!r} has {len(self.scenario.robots)} robots: "
-                             "in-process flights fly one robot for now")
+                             "in-process flights fly one robot, or two holding one bag")
         if self.scenario.goal_position is None:
             raise ValueError(f"scenario {self.scenario.name!r} has no goal")
         if state_source not in ("ekf", "truth"):
@@ -155,7 +156,8 @@ class Flight:
         self.sim: Any = None
         self.names = [r.name for r in self.scenario.robots]
         self.monitor: TaskMonitor | None = None
-        self.traj: Any = None
+        self.traj: Any = None               # the first robot's reference
+        self.trajs: dict[str, Any] = {}     # every robot's
         self._closed = False
 
     # ---- setup ----------------------------------------------------------------------------
@@ -178,8 +180,8 @@ class Flight:
         if seed is not None:
             self.seed = int(seed)
         if scenario is not None:
-            if len(scenario.robots) != 1 or scenario.goal_position is None:
-                raise ValueError("a reset scenario needs one robot and a goal")
+            if [r.name for r in scenario.robots] != self.names or scenario.goal_position is None:
+                raise ValueError(f"a reset scenario needs the robots {self.names} and a goal")
             self.scenario = scenario
             self.mode = flight_modes.get(scenario.flight_mode)
         self._make_sim(self.seed)
@@ -207,12 +209,11 @@ class Flight:
         self._read()
         for n in self.names:
             self._update_law(n, hold_only=True)
-        self.traj = None
+        self.traj, self.trajs = None, {}
         if self.plan_enabled:
             self._plan()
-            if self.traj is not None:
-                for law in self.laws.values():
-                    law.follow(self.traj, sim.time)
+            for n, traj in self.trajs.items():
+                self.laws[n].follow(traj, sim.time)
         task_kw = dict(self.task_kw)
         settle = float(self.controller_params.get("settle_time", 5.0))
         self.task = Task.from_scenario(self.scenario, plan_duration=None if math.isnan(
@@ -234,26 +235,44 @@ class Flight:
         return told if told > 0 else float(sc.bag.mass)
 
     def _plan(self) -> None:
-        """The leg's reference from the planner library, as /mob/planner/global makes it."""
+        """The leg's references from the planner library, as planner_node makes them: one robot
+        as /mob/planner/global (its pose, the scenario's goal, face_forward, carry extent), two
+        as /mob/planner/formation (both poses, the first robot's goal, the bag's pose and size)."""
         from astrobee_control.reference import SampledTrajectory
-        from astrobee_planning import planner
+        from astrobee_planning import multi_robot, planner
         sc = self.scenario
         self._plan_error = ""
-        pos, q = self._truth[self.names[0]][0], self._truth[self.names[0]][1]
+        goal = (np.asarray(sc.goal_position, float),
+                rot.normalize(np.asarray(sc.goal_orientation, float)))
+        starts = [(self._truth[n][0], rot.normalize(self._truth[n][1])) for n in self.names]
         t0 = time.perf_counter()
         try:
-            plan = planner.plan_global(pos, rot.normalize(q), np.asarray(sc.goal_position, float),
-                                       rot.normalize(np.asarray(sc.goal_orientation, float)),
-                                       self.mode.name, bool(sc.face_forward),
-                                       float(sc.carry_extent) if sc.carrying_bag else 0.0)
+            if len(self.names) == 1:
+                plan = planner.plan_global(starts[0][0], starts[0][1], goal[0], goal[1],
+                                           self.mode.name, bool(sc.face_forward),
+                                           float(sc.carry_extent) if sc.carrying_bag else 0.0)
+                trajs = [plan.trajectory]
+                duration = plan.trajectory.duration
+            else:
+                bag = self._bag
+                bag_pose = None if bag is None else (np.asarray(bag.position, float),
+                                                     rot.normalize(bag.orientation))
+                plan = multi_robot.plan_formation(starts, goal, bag_pose,
+                                                  None if sc.bag is None else list(sc.bag.size),
+                                                  self.mode.name)
+                trajs = plan.robots
+                duration = plan.formation.centre.trajectory.duration
         except planner.PlanError as exc:
             self.planning_time = time.perf_counter() - t0
             self._plan_error = f"planning failed (code {exc.code}): {exc}"
             return
         self.planning_time = time.perf_counter() - t0
-        st = plan.trajectory.sample_rate(PLAN_SAMPLE_RATE)
-        self.plan_duration = float(plan.trajectory.duration)
-        self.traj = SampledTrajectory(st.t, st.pos, st.vel, st.acc, st.quat, st.omega, st.alpha)
+        self.plan_duration = float(duration)
+        for n, traj in zip(self.names, trajs):
+            st = traj.sample_rate(PLAN_SAMPLE_RATE)
+            self.trajs[n] = SampledTrajectory(st.t, st.pos, st.vel, st.acc, st.quat, st.omega,
+                                              st.alpha)
+        self.traj = self.trajs[self.names[0]]
 
     # ---- one tick -------------------------------------------------------------------------
     def _read(self) -> None:
@@ -448,7 +467,7 @@ class Flight:
                 "bag_mass": sc.bag.mass if sc.bag else 0.0,
                 "bag_resolution": sc.bag.resolution if sc.bag else 0,
                 "fem_solver": sc.bag.solver if sc.bag and sc.bag.model == "fem" else "",
-                "flight_mode": self.mode.name, "controller": ctl, "safety": self.safety,
+                "robots": len(self.names), "flight_mode": self.mode.name, "controller": ctl, "safety": self.safety,
                 "realism": realism, "state_source": self.state_source, "seed": self.seed}
 
     def close(self) -> None:

@@ -95,10 +95,29 @@ def test_step_action_adds_to_or_replaces_the_law_wrench(make_hop):
 
 
 def test_bad_arguments_are_one_line_errors(make_hop):
+    from astrobee.scenario import Scenario
     with pytest.raises(ValueError, match="controller must be pd or mpc"):
         Flight(make_hop(None), controller="lqr").reset()
-    with pytest.raises(ValueError, match="one robot"):
-        Flight("two_robots_bag")
+    with pytest.raises(ValueError, match="one robot, or two"):
+        Flight(Scenario.load("node2_to_jem", robots=["", "a", "b"]))
     from astrobee.scenario import ScenarioError
     with pytest.raises(ScenarioError):
         Flight("node2_to_jem", bag_model="nonsense")
+
+
+def test_two_robots_fly_the_formation_plan_to_their_goals():
+    """Two robots holding one bag: one law each, the formation planner's references; the Task
+    judges both (each robot named in the metrics)."""
+    from dataclasses import replace
+
+    from astrobee.scenario import Scenario
+    sc = Scenario.load("two_robots_bag")
+    sc = replace(sc, goal_position=(10.95, -1.05, 4.84))        # a 0.6 m hop along the node
+    with Flight(sc) as f:
+        res = f.run()
+        goals = f.task.goals
+    assert set(goals) == {"", "bumble"}
+    assert res.success, res.cause
+    assert res.metrics["final_position_error_bumble"] <= 0.2
+    assert res.metrics["final_position_error_robot"] <= 0.2
+    assert res.row()["robots"] == 2 and res.metrics["contacts"] == 0
