@@ -15,10 +15,10 @@ import numpy as np
 from astrobee import config
 from astrobee import rotations as rot
 
-from .base import Bag, BagState, kabsch
+from .base import Bag, BagState, quat_from_matrix
 from .mass_spring import Anchors, MassSpring
 from .mesh import bag_mesh
-from .node_contacts import collide_moving_boxes, collide_static_boxes
+from .node_contacts import collide_moving_boxes, collide_static_boxes, grow_boxes
 
 
 def quat_matrices(q: np.ndarray) -> np.ndarray:
@@ -28,6 +28,16 @@ def quat_matrices(q: np.ndarray) -> np.ndarray:
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
         np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def best_fit_rotation(rest_centred: np.ndarray, cur_centred: np.ndarray) -> np.ndarray:
+    """Rotation matrix taking centred rest points onto centred current points (Kabsch)."""
+    U, _, Vt = np.linalg.svd(rest_centred.T @ cur_centred)
+    R = Vt.T @ U.T
+    if np.linalg.det(R) < 0:
+        Vt[2] *= -1
+        R = Vt.T @ U.T
+    return R
 
 
 def robot_box_half() -> np.ndarray:
@@ -63,10 +73,13 @@ class FastFemBag(Bag):
         self.walls = np.asarray(walls, dtype=float)
         self.friction = float(self.params.get("friction", 0.5))
         self.margin = float(self.params.get("collision_margin", 0.006))
+        self._walls_grown = grow_boxes(self.walls, self.margin)
         # total anchor stiffness/damping per handle (N/m, N s/m), spread over its nodes
         self.anchor_k = float(self.params.get("anchor_stiffness", 5000.0))
         self.anchor_c = float(self.params.get("anchor_damping", 20.0))
         self.half = robot_box_half()
+        self._rest_mean = self.mesh.nodes.mean(axis=0)
+        self._rest_centred = self.mesh.nodes - self._rest_mean
         self.id = -1                                  # no pybullet body
         self.x = np.ascontiguousarray(self.mesh.nodes[:, None, :].copy())
         self.v = np.zeros_like(self.x)
@@ -163,14 +176,16 @@ class FastFemBag(Bag):
         self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel, self.external)
         flat_x, flat_v = x.reshape(-1, 3), v.reshape(-1, 3)
         self.last_penetration = collide_static_boxes(flat_x, flat_v, x_prev.reshape(-1, 3),
-                                                     self.walls, self.margin, self.friction)
+                                                     self.walls, self.margin, self.friction,
+                                                     self._walls_grown)
         robots = getattr(self, "_contact_robots", None) or self.robots or []
         pending = []
         skip = self._anchors.nodes if self._anchors is not None else None
         for r in robots:
             pos, q, vel, w = r.state()
+            rmat = np.array(self.p.getMatrixFromQuaternion(q.tolist())).reshape(1, 3, 3)
             fc, tc = collide_moving_boxes(
-                x, v, x_prev, pos[None], quat_matrices(q[None]), vel[None], w[None], self.half,
+                x, v, x_prev, pos[None], rmat, vel[None], w[None], self.half,
                 self.margin, self.friction, self.springs.node_mass, dt, skip)
             pending.append([r.id, None, None, None, None,
                             fc[0].tolist() if fc.any() else None, pos.tolist(), tc[0].tolist()])
@@ -198,15 +213,22 @@ class FastFemBag(Bag):
         if self._state is not None:
             return self._state
         x, v = self.x[:, 0, :], self.v[:, 0, :]
-        q, c = kabsch(self.mesh.nodes, x)
-        vel = v.mean(axis=0)
+        rest_c = self._rest_centred
+        c = x.mean(axis=0)
         r = x - c
-        L = np.cross(r, v - vel).sum(axis=0)
-        inertia = np.eye(3) * np.einsum("ij,ij->", r, r) - r.T @ r
+        R = best_fit_rotation(rest_c, r)                  # as base.kabsch, rest pre-centred
+        q = quat_from_matrix(R)
+        vel = v.mean(axis=0)
+        # angular momentum sum r x (v - vel) = sum r x v - (sum r) x vel, and sum r = 0
+        L = np.array([np.dot(r[:, 1], v[:, 2]) - np.dot(r[:, 2], v[:, 1]),
+                      np.dot(r[:, 2], v[:, 0]) - np.dot(r[:, 0], v[:, 2]),
+                      np.dot(r[:, 0], v[:, 1]) - np.dot(r[:, 1], v[:, 0])])
+        rtr = r.T @ r
+        inertia = np.eye(3) * np.trace(rtr) - rtr
         w = np.linalg.solve(inertia, L)
-        rest = c + rot.rotate(q, self.mesh.nodes - self.mesh.nodes.mean(axis=0))
-        deform = float(np.sqrt(np.mean(np.sum((x - rest) ** 2, axis=1))))
-        pos = c - rot.rotate(q, self.mesh.nodes.mean(axis=0))
+        dev = r - rest_c @ R.T
+        deform = float(np.sqrt(np.einsum("ij,ij->", dev, dev) / len(x)))
+        pos = c - R @ self._rest_mean
         self._state = BagState(pos, q, vel, w, deform, list(self.attached))
         return self._state
 

@@ -36,18 +36,35 @@ def _respond(v: np.ndarray, u: np.ndarray, n: np.ndarray, mu: float) -> np.ndarr
     return u + rel
 
 
+def grow_boxes(boxes: np.ndarray, margin: float) -> np.ndarray:
+    """Static boxes (B, 6 as lo, hi) grown by the contact margin, for collide_static_boxes."""
+    b = np.asarray(boxes, dtype=float)
+    return np.ascontiguousarray(np.concatenate([b[:, :3] - margin, b[:, 3:] + margin], axis=1))
+
+
 def collide_static_boxes(x: np.ndarray, v: np.ndarray, x_prev: np.ndarray, boxes: np.ndarray,
-                         margin: float, mu: float) -> float:
+                         margin: float, mu: float, grown: np.ndarray | None = None) -> float:
     """Keep points x (M, 3) out of static boxes (B, 6 as lo, hi), in place; returns the deepest
-    penetration found before the correction (m, 0 when none)."""
+    penetration found before the correction (m, 0 when none). grown: grow_boxes(boxes, margin)
+    when the caller keeps it (saves recomputing it every step)."""
+    g = grow_boxes(boxes, margin) if grown is None else grown
     lo_all, hi_all = x.min(axis=0), x.max(axis=0)
-    near = np.all((boxes[:, :3] - margin < hi_all) & (boxes[:, 3:] + margin > lo_all), axis=1)
+    near = ((g[:, :3] < hi_all) & (g[:, 3:] > lo_all)).all(axis=1)
     deepest = 0.0
-    for b in boxes[near]:
-        lo, hi = b[:3] - margin, b[3:] + margin
+    cand = g[near]
+    if not len(cand):
+        return deepest
+    # which near boxes hold a node at all, in one pass (usually none: the bag in open space)
+    hit = ((x[None] > cand[:, None, :3]) & (x[None] < cand[:, None, 3:])).all(axis=2)
+    moved = False           # once a box has moved nodes, later boxes are checked afresh
+    for b, mask in zip(cand, hit):
+        if not moved and not mask.any():
+            continue
+        lo, hi = b[:3], b[3:]
         inside = np.flatnonzero(np.all((x > lo) & (x < hi), axis=1))
         if not inside.size:
             continue
+        moved = True
         q = x[inside]
         ax, face = push_out(q, x_prev[inside], lo, hi)
         rows = np.arange(len(inside))
