@@ -1,4 +1,5 @@
-# Every target creates .venv when it is missing. Python 3.11+ required.
+# Every target creates .venv when it is missing. Python 3.11+ required (3.11 uses pybullet's
+# wheel; 3.12+ build pybullet from source: build-essential and python3.X-dev needed).
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -10,6 +11,18 @@ install: $(STAMP)
 
 $(STAMP): pyproject.toml setup.py
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@# pybullet 3.2.7 has wheels up to Python 3.11; on 3.12+ (Ubuntu 24.04) pip builds its sdist:
+	@# that needs g++ and the Python headers (say so in one line when missing) and takes long
+	@if ! $(PY) -c 'import pybullet' >/dev/null 2>&1 && \
+	    $(PY) -c 'import sys; sys.exit(sys.version_info < (3, 12))'; then \
+	  ver=$$($(PY) -c 'import sys; print("%d.%d" % sys.version_info[:2])'); \
+	  inc=$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["include"])'); \
+	  if ! command -v g++ >/dev/null 2>&1 || [ ! -f "$$inc/Python.h" ]; then \
+	    echo "make install: pybullet has no wheel for Python $$ver; building it needs g++ and Python.h: sudo apt-get install build-essential python$$ver-dev (or Python 3.11: rm -rf $(VENV); make install PYTHON=python3.11)" >&2; \
+	    exit 1; \
+	  fi; \
+	  echo "make install: no pybullet wheel for Python $$ver: pip builds it from source (~460 C++ files, roughly 10-20 min on 2 cores)"; \
+	fi
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
 	@touch $(STAMP)
