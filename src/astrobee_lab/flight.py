@@ -105,8 +105,8 @@ def make_controller(controller: str | Any, flight_mode, params: dict | None = No
 
 class Flight:
     """One leg in-process (see the module docstring): one robot, or two holding one bag (one law
-    each, the formation planner's references; each law told the whole bag, as each controller
-    node is on the graph)."""
+    each, the formation planner's references; each law told its share of the bag's mass, as
+    the launch tells each controller node)."""
 
     def __init__(self, scenario: str | Scenario = "node2_to_jem_bag", seed: int = 0,
                  controller: str | Any = "pd", safety: bool = False, *,
@@ -228,11 +228,16 @@ class Flight:
         return self._obs()
 
     def _bag_mass(self) -> float | None:
+        """The bag mass each law is told: the simulator's told mass (realism bag_mass_told),
+        shared evenly when every handle is held by its own robot (as the launch gives each
+        controller node its share)."""
         sc = self.scenario
         if sc.bag is None:
             return None
         told = float(self.sim.told_bag_mass())
-        return told if told > 0 else float(sc.bag.mass)
+        mass = told if told > 0 else float(sc.bag.mass)
+        n = len(self.names)
+        return mass / n if n > 1 and sc.bag.handles == n else mass
 
     def _plan(self) -> None:
         """The leg's references from the planner library, as planner_node makes them: one robot
