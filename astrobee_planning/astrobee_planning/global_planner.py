@@ -143,11 +143,12 @@ class SplineQP:
                         scl.append(0 if k == 0 else 2 + 2 * (j * c + k - 1))
                     r += 1
         self.n_eq = r
-        for sign in (1.0, -1.0):
-            for v in range(self.nx):
-                rows.append(r); cols.append(v); base.append(sign); scl.append(0)
-                r += 1
-        self.m = r
+        box = np.arange(2 * self.nx)                 # x <= hi rows, then -x <= -lo rows
+        rows = np.concatenate([rows, r + box])
+        cols = np.concatenate([cols, box % self.nx])
+        base = np.concatenate([base, np.where(box < self.nx, 1.0, -1.0)])
+        scl = np.concatenate([scl, np.zeros(2 * self.nx, dtype=int)])
+        self.m = r + 2 * self.nx
         ids = np.arange(1, len(rows) + 1, dtype=float)
         a = sp.csc_matrix((ids, (rows, cols)), shape=(self.m, self.nx))
         a.sort_indices()
@@ -155,7 +156,7 @@ class SplineQP:
         self._a = a
         self._base = np.array(base, float)[perm]
         self._scl = np.array(scl)[perm]
-        q = sp.block_diag([sp.csc_matrix(bezier.jerk_cost_matrix(n))] * (3 * S), format="csc")
+        q = sp.kron(sp.identity(3 * S, format="csc"), sp.csc_matrix(bezier.jerk_cost_matrix(n)), format="csc")
         # tracking: w |x(joint) - reference joint|^2 at the start of every segment but the first
         self._q = np.zeros(self.nx)
         diag = np.zeros(self.nx)
