@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml setup.py
 	    echo "make install: pybullet has no wheel for Python $$ver; building it needs g++ and Python.h: sudo apt-get install build-essential python$$ver-dev (or Python 3.11: rm -rf $(VENV); make install PYTHON=python3.11)" >&2; \
 	    exit 1; \
 	  fi; \
-	  echo "make install: no pybullet wheel for Python $$ver: pip builds it from source (~460 C++ files, roughly 10-20 min on 2 cores)"; \
+	  echo "make install: no pybullet wheel for Python $$ver: pip builds it from source (248 C/C++ files, roughly 10-20 min on 2 cores)"; \
 	fi
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
