@@ -10,7 +10,7 @@ while attached). For each nominal command publishes the filtered FamCommand on
 every other field copied; before any state has arrived the nominal command passes unchanged.
 Latched diagnostics on <ns>/gnc/ctl/safety (diagnostic_msgs/DiagnosticArray, one status: OK,
 WARN when the filter changed the command, ERROR when it fell back to the maximum braking wrench;
-values active, delta_norm, slack, min_barrier, fallback, reason), published when the
+values active, delta_norm, slack, min_barrier, omega_barrier (w_max^2 - |w|^2), fallback, reason), published when the
 active/fallback state changes and at most `diagnostics_rate` Hz otherwise.
 
 Callbacks never raise: a bad or non-finite sample is logged and dropped.
@@ -221,6 +221,7 @@ class SafetyFilterNode:
                  ("delta_norm", f"{res.delta_norm:.6g}"),
                  ("slack", f"{res.slack:.6g}"),
                  ("min_barrier", f"{res.min_barrier:.6g}"),
+                 ("omega_barrier", f"{res.omega_barrier:.6g}"),
                  ("fallback", str(bool(res.fallback)).lower()),
                  ("reason", res.reason or ""),
                  ("ticks", str(self.ticks)),

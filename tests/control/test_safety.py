@@ -245,3 +245,4 @@ def test_rate_barrier_lets_a_braking_torque_through():
     assert not slow.active
     fast = filt.filter(np.zeros(3), mode.max_torque * np.array([0, 0, 1.0]), st)
     assert fast.active and fast.torque[2] < 0
+    assert fast.omega_barrier == pytest.approx(mode.hard_limit_omega ** 2 * (1 - 1.1 ** 2))

@@ -86,7 +86,8 @@ def test_full_thrust_at_a_wall_is_stopped_through_the_graph(router_env, body_axi
         assert float(np.linalg.norm(end[2])) < 0.05, end[2]
         # the filter reported it intervened (WARN, active) and never crashed
         assert any(level in (1, 2) and kv["active"] == "true" for level, kv in diags), diags[-3:]
-        assert {"active", "delta_norm", "slack", "min_barrier", "fallback", "reason"} <= set(diags[-1][1])
+        assert {"active", "delta_norm", "slack", "min_barrier", "omega_barrier", "fallback",
+                "reason"} <= set(diags[-1][1])
     finally:
         for p in procs:
             testing.stop(p)

@@ -71,6 +71,7 @@ class SafetyResult:
     barriers_h1: np.ndarray      # (points, 6) first-order barriers h_dot + alpha1(h) (m/s)
     boxes: np.ndarray            # (points,) index of each point's active box in the candidates
     reason: str = ""             # why the fallback was taken, or "" when none
+    omega_barrier: float = float("inf")   # w_max^2 - |w|^2 (rad^2/s^2); inf: no rate limit
     min_barrier: float = field(init=False)
 
     def __post_init__(self) -> None:
@@ -252,6 +253,7 @@ class SafetyFilter:
         rows_t = np.einsum("fi,pij->pfj", normals, at)
         lower = need - np.einsum("fi,pi->pf", normals, c)                  # (P, 6)
         w_row_f, w_row_t, w_lower = self._rate_row(w, gyro)
+        wb = self.omega_max ** 2 - float(w @ w) if self.omega_max > 0 else float("inf")
 
         # transparent when the (clipped) nominal wrench meets every barrier row
         f_c = np.clip(f_nom, -self.f_max, self.f_max)
@@ -260,7 +262,7 @@ class SafetyFilter:
         if np.all(lhs >= lower) and w_row_f @ f_c + w_row_t @ t_c >= w_lower:
             return SafetyResult(f_c, t_c, False, True, False,
                                 float(np.linalg.norm(np.r_[f_c - f_nom, t_c - t_nom])), 0.0,
-                                h, h1, sel)
+                                h, h1, sel, omega_barrier=wb)
 
         # QP: update values only
         nr = 6 * n_pts
@@ -302,12 +304,14 @@ class SafetyFilter:
         if not ok or slack > self.slack_tol:
             why = (f"QP {status}" if not ok else
                    f"barriers infeasible within the limits (slack {slack:.3g} braking decelerations)")
-            return self._brake(f_nom, t_nom, vel, w, r, h, h1, sel, slack if ok else float("inf"), why)
+            res = self._brake(f_nom, t_nom, vel, w, r, h, h1, sel, slack if ok else float("inf"), why)
+            res.omega_barrier = wb
+            return res
         f = np.clip(x[0:3], -1.0, 1.0) * self._scale[:3]
         t = np.clip(x[3:6], -1.0, 1.0) * self._scale[3:]
         return SafetyResult(f, t, True, True, False,
                             float(np.linalg.norm(np.r_[f - f_nom, t - t_nom])), max(slack, 0.0),
-                            h, h1, sel)
+                            h, h1, sel, omega_barrier=wb)
 
     def _rate_row(self, w: np.ndarray, gyro: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The angular-rate barrier as row_f . F + row_t . tau >= lower (body frame):
