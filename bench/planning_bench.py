@@ -15,7 +15,7 @@ import numpy as np
 
 from astrobee import config, flight_modes
 from astrobee import rotations as rot
-from astrobee_planning import boxes, local_planner, multi_robot, planner
+from astrobee_planning import local_planner, multi_robot, planner
 
 RATE = 350.0      # Hz, the paper's sampling rate
 # issue 17: the paper's code on the same machine, plan + 350 Hz samples / its trajectory (s)
