@@ -25,11 +25,10 @@ commands:
 
 
 def _launch(argv: list[str]) -> int:
-    import argparse
     from astrobee_bringup import launcher
 
-    p = argparse.ArgumentParser(prog="astrobee launch",
-                                description="Start a launch description's nodes.")
+    from roszen.cli.common import Parser     # a bad option is one line, not a usage dump
+    p = Parser(prog="astrobee launch", description="Start a launch description's nodes.")
     p.add_argument("name", nargs="?", help="launch description (module in astrobee_bringup/launch/ "
                    "or a .py file)")
     p.add_argument("args", nargs="*", help="launch arguments name:=value")

@@ -91,6 +91,7 @@ def test_ctrl_c_during_the_launch_gives_no_traceback(procs, port, tmp_path):
     (["cargo_transport", "scenario:=no_such_place"], "unknown scenario"),
     (["cargo_transport", "lockstep_timeout:=-1"], "lockstep_timeout must be > 0"),
     (["cargo_transport", "scenaro:=node2_to_jem"], "unknown launch argument scenaro"),
+    (["cargo_transport", "--port", "abc"], "argument --port: invalid int value: 'abc'"),
 ])
 def test_rejected_launch_leaves_no_run_folder(procs, tmp_path, args, says):
     run_dir = tmp_path / "runs" / "t1"
