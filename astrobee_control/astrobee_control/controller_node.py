@@ -56,6 +56,7 @@ COMMON_PARAMETERS: dict[str, Any] = {
     "state_timeout": 1.0,           # wall s without a state before /mob/state reports it stale
 }
 PEER_CHECK_PERIOD = 0.1             # wall s between two looks at the graph and the state's age
+TOKEN_SETTLE = 0.3                  # wall s a node may keep its token after its topic's went
 
 
 def size_override(size: Any) -> np.ndarray | None:
@@ -179,6 +180,8 @@ class ControllerNode:
         self._state_publishers: list[str] = []
         self._last_state_wall: float | None = None
         self._lost = ""                 # why states stopped ("" while they come)
+        self._gone = False              # ... because the state topic has no publisher left
+        self._unpublished_since: float | None = None   # wall s the topic lost its publishers
 
         M = roszen.message_class
         self.FamCommand, self.ControlState = M("astrobee_msgs/msg/FamCommand"), M("astrobee_msgs/msg/ControlState")
@@ -247,12 +250,27 @@ class ControllerNode:
                        if e.node_fqn != self.node.get_fully_qualified_name()})
         if pubs:
             self._state_publishers = pubs
-        if self._last_state_wall is None or self._lost.startswith("lost"):
+            self._unpublished_since = None
+        if self._last_state_wall is None or self._gone:
             return
         who = ", ".join(n.lstrip("/") for n in self._state_publishers) or "its publisher"
         if not pubs:
-            self._lost = f"lost node {who}: no publisher of {self.state_topic}"
-            self.log.error(f"{self._lost}; stopping (holding the last pose)")
+            alive = {"/" + n if ns in ("", "/") else ns.rstrip("/") + "/" + n
+                     for n, ns in self.node.get_node_names_and_namespaces()}
+            now = time.monotonic()
+            if self._unpublished_since is None:
+                self._unpublished_since = now
+            publisher_alive = any(p in alive for p in self._state_publishers)
+            if publisher_alive and now - self._unpublished_since < TOKEN_SETTLE:
+                return      # a dead process's tokens leave one by one: its node token may lag
+            if publisher_alive:
+                # e.g. the sim reset to a scenario without this robot: not a lost node
+                self._lost = f"no publisher of {self.state_topic} ({who} stopped publishing it)"
+                self.log.warn(f"{self._lost}; stopping (holding the last pose)")
+            else:
+                self._lost = f"lost node {who}: no publisher of {self.state_topic}"
+                self.log.error(f"{self._lost}; stopping (holding the last pose)")
+            self._gone = True
             if self.law.state != mc.MotionState.IDLE and self._last_state is not None:
                 self.law.stop(self._last_state, self._last_stamp or 0.0, self._lost)
             self._publish_mob(self._lost, force=True, log=False)
@@ -264,9 +282,9 @@ class ControllerNode:
 
     def _state_back(self, state: State) -> None:
         """The first state after a loss or a stall: say so; after a loss hold its pose."""
-        was, self._lost = self._lost, ""
+        gone, self._lost, self._gone = self._gone, "", False
         self.log.info(f"state back on {self.state_topic}")
-        if was.startswith("lost"):
+        if gone:
             self.law.rehold(state, f"state back on {self.state_topic}: holding the pose")
             self._last_segment_key = None
 
