@@ -252,48 +252,53 @@ class SplineQP:
         kz = np.zeros(nk)
         tol_d = BANDED_TOLERANCE * (1.0 + float(np.max(np.abs(q))))
         tol_p = BANDED_TOLERANCE * (1.0 + max(float(np.max(np.abs(b_eq))), float(np.max(np.abs(h)))))
+        xx = np.empty(2 * nx)                    # [x; -x]
+        ds = np.empty(2 * nx)
+        rhs = np.zeros(nk)
+
+        def newton(rc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            v = (rc + z * rg) / s
+            rhs[vp] = -rd - (v[:nx] - v[nx:])
+            sol = self._gbtrs(lu, bw, bw, rhs[:, None], piv)[0][:, 0]
+            dx = sol[vp]
+            np.add(dx, rg[:nx], out=ds[:nx])
+            np.subtract(rg[nx:], dx, out=ds[nx:])
+            return dx, sol[rp], -(rc + z * ds) / s
+
+        def step(v: np.ndarray, dv: np.ndarray) -> float:
+            """Largest a <= 1 with v + a dv >= 0."""
+            r = np.divide(v, -dv, out=np.full_like(v, np.inf), where=dv < 0)
+            return min(1.0, float(r.min()))
+
         for it in range(max_iter):
             kz[vp], kz[rp] = x, y
             kz = K @ kz
             rd = kz[vp] + q - (z[:nx] - z[nx:])
             rpv = kz[rp] - b_eq
-            rg = np.concatenate([x, -x]) - s - h
+            xx[:nx], xx[nx:] = x, -x
+            rg = xx - s - h
             mu = float(s @ z) / (2 * nx)
             if (np.max(np.abs(rd)) <= tol_d and np.max(np.abs(rpv)) <= tol_p
                     and np.max(np.abs(rg)) <= tol_p and mu <= 1e-2 * tol_d):
                 self.iterations += it
                 return x * dx_
-            w = z / s
             ab = ab0.copy()
-            ab[2 * bw, vp] += w[:nx] + w[nx:]
+            ab[2 * bw, vp] += (z[:nx] / s[:nx] + z[nx:] / s[nx:])
             lu, piv, info = self._gbtrf(ab, bw, bw, overwrite_ab=1)
             if info != 0:
                 return None
-            rhs = np.zeros(nk)
             rhs[rp] = -rpv
-
-            def newton(rc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-                v = (rc + z * rg) / s
-                rhs[vp] = -rd - (v[:nx] - v[nx:])
-                sol, _ = self._gbtrs(lu, bw, bw, rhs[:, None], piv)
-                dx = sol[vp, 0]
-                ds = np.concatenate([dx, -dx]) + rg
-                return dx, sol[rp, 0], ds, -(rc + z * ds) / s
-
-            def step(v: np.ndarray, dv: np.ndarray) -> float:
-                neg = dv < 0
-                return min(1.0, float(np.min(v[neg] / -dv[neg]))) if neg.any() else 1.0
-
-            dx, dy, ds, dz = newton(s * z)                                   # predictor
+            sz = s * z
+            dx, dy, dz = newton(sz)                                          # predictor
             ap, ad = step(s, ds), step(z, dz)
             sigma = (float((s + ap * ds) @ (z + ad * dz)) / (2 * nx) / mu) ** 3
-            dx, dy, ds, dz = newton(s * z + ds * dz - sigma * mu)            # corrector
+            dx, dy, dz = newton(sz + ds * dz - sigma * mu)                   # corrector
             ap, ad = 0.99 * step(s, ds), 0.99 * step(z, dz)
             x = x + ap * dx
             s = s + ap * ds
             y = y + ad * dy
             z = z + ad * dz
-            if not (np.all(np.isfinite(x)) and np.all(np.isfinite(z))) or (ap < 1e-6 and ad < 1e-6):
+            if not (np.isfinite(x @ x) and np.isfinite(z @ z)) or (ap < 1e-6 and ad < 1e-6):
                 return None
         return None
 
