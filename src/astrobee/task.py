@@ -29,8 +29,15 @@ TIME_MARGIN = 10.0     # s of time limit beyond the plan and the settle time
 
 
 def robot_label(name: str) -> str:
-    """How a robot is named in a cause: its namespace, or 'robot' for the default one."""
+    """A robot in a column name, and the simulator's name of it in contacts: its namespace,
+    or 'robot' for the default one."""
     return name or "robot"
+
+
+def robot_named(name: str) -> str:
+    """How causes name a robot (as the mission's summary does): "robot bumble", "the default
+    robot"."""
+    return f"robot {name}" if name else "the default robot"
 
 
 @dataclass(frozen=True)
@@ -65,9 +72,10 @@ class TaskSample:
     reference: dict[str, np.ndarray] | None = None      # robot -> reference position
     contacts: int = 0                                   # contacts with the station this tick
     contact_bodies: tuple[str, ...] = ()                # e.g. "bag-iss"
+    touching: tuple[str, ...] = ()                      # bodies touching: robot_label()s, "bag"
     robot_clearance: float = float("nan")               # m, smallest over the robots
     bag_clearance: float = float("nan")                 # m (negative or nan: no bag)
-    faults: tuple[str, ...] = ()                        # active faults, "<robot>: text"
+    faults: dict[str, tuple[str, ...]] = field(default_factory=dict)   # robot -> active faults
     bag_robot_speed: float = float("nan")               # m/s, |v_bag - v_robot|
     effort: float = 0.0                                 # mean (wrench / limit)^2, 0..1
 
@@ -142,7 +150,8 @@ class TaskMonitor:
         self.min_bag_clearance = float("inf")
         self.contact_samples = 0
         self.contact_bodies: set[str] = set()
-        self.faults: list[str] = []
+        self.touch_samples: dict[str, int] = {}             # body -> samples it touched
+        self.robot_faults: dict[str, list[str]] = {}        # robot -> faults seen (in order)
         self.peak_bag_robot_speed = float("nan")
         self.time_to_goal: float | None = None
         self.final: dict[str, tuple[float, float]] = {}     # robot -> (position, attitude error)
@@ -205,9 +214,11 @@ class TaskMonitor:
         if s.contacts:
             self.contact_samples += 1
             self.contact_bodies.update(s.contact_bodies)
-        for f in s.faults:
-            if f not in self.faults:
-                self.faults.append(f)
+            for body in set(s.touching):
+                self.touch_samples[body] = self.touch_samples.get(body, 0) + 1
+        for robot, texts in s.faults.items():
+            seen = self.robot_faults.setdefault(robot, [])
+            seen += [f for f in texts if f not in seen]
         if math.isfinite(s.bag_robot_speed) and not s.bag_robot_speed <= self.peak_bag_robot_speed:
             self.peak_bag_robot_speed = float(s.bag_robot_speed)
 
@@ -221,6 +232,31 @@ class TaskMonitor:
         return self.reward(s)
 
     # ---- judgement ------------------------------------------------------------------------
+    @property
+    def faults(self) -> list[str]:
+        """Every fault seen, "<robot named>: text"."""
+        return [f"{robot_named(r)}: {f}" for r, fs in self.robot_faults.items() for f in fs]
+
+    def robot_problems(self, name: str) -> list[str]:
+        """What keeps one robot from success (the mission summary's wording): faults, its
+        contact samples, final position and attitude error beyond the tolerance."""
+        out = []
+        faults = self.robot_faults.get(name)
+        if faults:
+            out.append(f"fault: {'; '.join(faults)}")
+        touched = self.touch_samples.get(robot_label(name), 0)
+        if touched:
+            out.append(f"{touched} contact samples")
+        tol_p, tol_a = self.task.tolerance_position, self.task.tolerance_attitude
+        e_p, e_a = self.final.get(name, (None, None))
+        if e_p is None or not e_p <= tol_p:
+            out.append("final position error " + (f"{e_p:.3f} m > {tol_p} m" if e_p is not None
+                                                  else "unknown (no pose)"))
+        if e_a is None or not e_a <= tol_a:
+            out.append("final attitude error " + (f"{e_a:.3f} rad > {tol_a} rad" if e_a is not None
+                                                  else "unknown (no pose)"))
+        return out
+
     @property
     def goal_reached(self) -> bool:
         """Every robot within tolerance of its goal and at rest, at the last sample."""
@@ -244,31 +280,25 @@ class TaskMonitor:
                 and self.t - self.t0 >= self.task.time_limit - 1e-9)
 
     def verdict(self) -> tuple[bool, str]:
-        """(success, cause): 'goal reached', or every reason the leg failed, robots named."""
-        problems = []
-        if self.failure:
-            problems.append(self.failure)
-        if self.samples == 0:
-            problems.append("no samples")
-        if self.faults:
-            problems.append(f"faults: {'; '.join(self.faults)}")
-        if self.contact_samples:
-            problems.append(f"{self.contact_samples} contact samples "
-                            f"({', '.join(sorted(self.contact_bodies)) or 'station'})")
+        """(success, cause) in the mission summary's words: 'goal reached', or why not: a
+        failure before flight, the time limit, each robot's problems (named when there are
+        several), the cargo bag's contacts."""
+        parts = [self.failure] if self.failure else []
+        if self.samples == 0 and not self.failure:
+            parts.append("no samples")
         if self.truncated:
-            problems.append(f"time limit of {self.task.time_limit:g} s reached")
-        tol_p, tol_a = self.task.tolerance_position, self.task.tolerance_attitude
-        for name in self.task.goals:
-            if self.samples and name not in self.final:
-                problems.append(f"{robot_label(name)}: no pose")
-                continue
-            e_p, e_a = self.final.get(name, (float("nan"), float("nan")))
-            if self.samples and not e_p <= tol_p:
-                problems.append(f"{robot_label(name)}: final position error {e_p:.3f} m > {tol_p} m")
-            if self.samples and not e_a <= tol_a:
-                problems.append(f"{robot_label(name)}: final attitude error {e_a:.3f} rad > "
-                                f"{tol_a} rad")
-        return (not problems, "goal reached" if not problems else "; ".join(problems))
+            parts.append(f"time limit of {self.task.time_limit:g} s reached")
+        goals = list(self.task.goals)
+        for name in goals:
+            probs = self.robot_problems(name)
+            if probs and not self.failure:
+                parts.append("; ".join(probs) if len(goals) == 1 else
+                             f"{robot_named(name)}: {'; '.join(probs)}")
+        cargo = self.touch_samples.get("bag", 0)
+        if cargo:
+            parts.append(f"cargo bag: {cargo} contact samples")
+        ok = not parts
+        return ok, "goal reached" if ok else "; ".join(parts)
 
     def reward(self, s: TaskSample) -> float:
         """Reward of the tick whose sample `s` was the last update (see RewardWeights)."""

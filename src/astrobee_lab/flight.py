@@ -26,7 +26,7 @@ import numpy as np
 from astrobee import config, flight_modes
 from astrobee import rotations as rot
 from astrobee.scenario import Scenario
-from astrobee.task import Task, TaskMonitor, TaskSample, robot_label
+from astrobee.task import Task, TaskMonitor, TaskSample
 
 CONTROL_RATE = 62.5        # Hz: the sim's publish rate, one command per state
 PLAN_SAMPLE_RATE = 10.0    # Hz: planner_node's default segment sampling
@@ -392,8 +392,9 @@ class Flight:
         positions = [self._truth[n][0] for n in self.names]
         rc, bc = sim.clearance(positions)
         contacts = sim.contacts()
-        faults = tuple(f"{robot_label(n)}: propulsion watchdog (no command for "
-                       f"{sim.watchdog_timeout:g} s)" for n in self.names if sim.faulted(n))
+        # sim_node's /sim/fault wording (the mission's summary quotes it)
+        faults = {n: (f"sim/propulsion_watchdog: no command for {sim.watchdog_timeout:g} s: "
+                      "propulsion stopped (code 1)",) for n in self.names if sim.faulted(n)}
         bag = self._bag
         rel = math.nan
         if bag is not None:
@@ -410,6 +411,7 @@ class Flight:
                        if self._steps[n].control_mode != 0},
             contacts=len(contacts),
             contact_bodies=tuple(sorted({f"{c.body_a}-{c.body_b}" for c in contacts})),
+            touching=tuple(sorted({c.body_a for c in contacts})),
             robot_clearance=float(rc), bag_clearance=float(bc), faults=faults,
             bag_robot_speed=rel, effort=effort)
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from astrobee import msgconv as mc
-from astrobee.task import Task, TaskMonitor, TaskSample, robot_label
+from astrobee.task import Task, TaskMonitor, TaskSample, robot_named
 
 CONTROLLING = 9
 ENDED = (1, 2)          # IDLE, STOPPED
@@ -78,9 +78,10 @@ def samples_from_bag(bag_dir: str | os.PathLike, namespace: str = "") -> list[Ta
             contacts=0 if c is None else len(c.contacts) or int(bool(c.in_contact)),
             contact_bodies=() if c is None else tuple(sorted({f"{x.body_a}-{x.body_b}"
                                                               for x in c.contacts})),
+            touching=() if c is None else tuple(sorted({str(x.body_a) for x in c.contacts})),
             robot_clearance=float("nan") if c is None else float(c.robot_clearance),
             bag_clearance=float("nan") if c is None else float(c.bag_clearance),
-            faults=tuple(active), bag_robot_speed=speed))
+            faults={robot: tuple(active)} if active else {}, bag_robot_speed=speed))
     return out
 
 
@@ -90,7 +91,7 @@ def judge_bag(bag_dir: str | os.PathLike, task: Task, namespace: str = "") -> Ta
     monitor = task.monitor()
     samples = samples_from_bag(bag_dir, namespace)
     if not samples:
-        monitor.fail(f"{robot_label(namespace.strip('/'))}: no controlled flight in the recording")
+        monitor.fail(f"{robot_named(namespace.strip('/'))}: no controlled flight in the recording")
     for s in samples:
         monitor.update(s)
     return monitor

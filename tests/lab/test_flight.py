@@ -36,7 +36,16 @@ def test_pd_flight_with_rigid_bag_reaches_goal_and_row_has_the_fields(rigid_hop)
     assert ROW_FIELDS <= set(row), ROW_FIELDS - set(row)
     assert row["bag_model"] == "rigid" and row["controller"] == "pd" and row["seed"] == 0
     assert all(isinstance(v, (str, int, float, bool)) for v in row.values())
-    assert "roszen" not in sys.modules and "zenoh" not in sys.modules
+
+
+def test_the_lab_loads_no_transport():
+    """Importing the flight, the environments and the Task loads neither zenoh nor roszen."""
+    import subprocess
+    code = ("import sys, astrobee_lab.flight, astrobee_lab.envs, astrobee.task; "
+            "bad = [m for m in ('roszen', 'zenoh') if m in sys.modules]; "
+            "sys.exit(f'loaded {bad}' if bad else 0)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
 
 
 def test_same_arguments_and_seed_give_the_same_flight(make_hop):
@@ -62,8 +71,10 @@ def test_a_hard_push_into_the_wall_fails_on_contact(make_hop):
             if f.monitor.terminated:
                 break
         ok, cause = f.monitor.verdict()
+        bodies = f.monitor.metrics()["contact_bodies"]
     assert not ok
-    assert "contact samples (robot-iss)" in cause
+    assert cause.startswith("fault") is False and "contact samples" in cause
+    assert "robot-iss" in bodies
 
 
 def test_a_goal_outside_the_station_fails_at_planning(make_hop):

@@ -51,22 +51,25 @@ def test_success_metrics_and_time_to_goal():
     assert met["contacts"] == 0 and met["duration"] == pytest.approx(2.0)
 
 
-def test_contact_fault_and_final_error_are_named():
+def test_contact_fault_and_final_error_in_the_summary_words():
     m = task().monitor()
-    m.update(sample(0.0, [10.95, 0.0, 4.84], contacts=2, contact_bodies=("bag-iss",)))
-    m.update(sample(0.1, [10.95, 0.0, 4.84], faults=("robot: propulsion watchdog",)))
+    m.update(sample(0.0, [10.95, 0.0, 4.84], contacts=2, contact_bodies=("bag-iss", "robot-iss"),
+                    touching=("bag", "robot")))
+    m.update(sample(0.1, [10.95, 0.0, 4.84], faults={"": ("sim/propulsion_watchdog: stopped",)}))
     ok, cause = m.verdict()
     assert not ok
-    assert "1 contact samples (bag-iss)" in cause
-    assert "faults: robot: propulsion watchdog" in cause
-    assert "robot: final position error 6.000 m" in cause
+    assert cause == ("fault: sim/propulsion_watchdog: stopped; 1 contact samples; "
+                     "final position error 6.000 m > 0.2 m; cargo bag: 1 contact samples")
+    assert m.faults == ["the default robot: sim/propulsion_watchdog: stopped"]
     assert m.terminated and m.failed_early       # a fault ends an episode
+    assert m.metrics()["contact_bodies"] == "bag-iss,robot-iss"
 
 
 def test_contact_ends_an_episode_only_when_asked():
     for end, expect in ((False, False), (True, True)):
         m = task(end_on_contact=end).monitor()
-        m.update(sample(0.0, [10.95, 0.0, 4.84], contacts=1, contact_bodies=("robot-iss",)))
+        m.update(sample(0.0, [10.95, 0.0, 4.84], contacts=1, contact_bodies=("robot-iss",),
+                        touching=("robot",)))
         assert m.terminated is expect
 
 
@@ -98,8 +101,7 @@ def test_two_robots_each_judged_and_named():
                                                         goals["bumble"][1])}
     m.update(TaskSample(t=0.0, poses=poses))
     ok, cause = m.verdict()
-    assert not ok and cause.startswith("bumble: final position error 0.500 m")
-    assert "robot:" not in cause
+    assert not ok and cause == "robot bumble: final position error 0.500 m > 0.2 m"
 
 
 def test_reward_rewards_progress_and_penalises_contact_and_clearance():
