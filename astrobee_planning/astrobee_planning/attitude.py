@@ -37,6 +37,38 @@ def min_rotation(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return rot.from_axis_angle(axis / s, np.arctan2(s, c))
 
 
+def min_rotations(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """`min_rotation` of each row pair of unit vectors u, v (K, 3) -> (K, 4), vectorised."""
+    u, v = np.atleast_2d(u), np.atleast_2d(v)
+    c = np.sum(u * v, axis=1)
+    axis = np.cross(u, v)
+    s = np.linalg.norm(axis, axis=1)
+    half = 0.5 * np.arctan2(s, c)
+    out = np.zeros((len(u), 4))
+    ok = s >= 1e-12
+    out[ok, :3] = axis[ok] / s[ok, None] * np.sin(half[ok])[:, None]
+    out[ok, 3] = np.cos(half[ok])
+    out[~ok & (c > 0), 3] = 1.0
+    for k in np.flatnonzero(~ok & (c <= 0)):       # opposite directions: half a turn
+        out[k] = min_rotation(u[k], v[k])
+    return out
+
+
+def transported_headings(q0: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """q[0] = q0, q[k] = min_rotation(u[k-1], u[k]) (x) q[k-1]: the parallel transport along the
+    unit tangents u (K, 3), by a prefix scan of quaternion products (log2 K vectorised steps)."""
+    r = min_rotations(u[:-1], u[1:])                 # (K-1, 4)
+    pre = r.copy()                                   # pre[k] = r[k] (x) ... (x) r[0] once scanned
+    d = 1
+    while d < len(pre):
+        pre[d:] = rot.multiply(pre[d:], pre[:-d])
+        d *= 2
+    q = np.empty((len(u), 4))
+    q[0] = q0
+    q[1:] = rot.multiply(pre, np.broadcast_to(q0, pre.shape))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
 def _tangents(spline: Spline, t: np.ndarray) -> np.ndarray:
     """Unit direction of travel at times t; where the speed vanishes, the nearest defined one."""
     v = spline.evaluate(t, 1)
@@ -60,10 +92,7 @@ def face_forward(spline: Spline, t_offset: float = 0.0, samples_per_second: floa
     joints = np.concatenate([[0.0], np.cumsum(spline.durations)])
     ts = np.unique(np.concatenate([ts, joints]))
     u = _tangents(spline, ts)
-    q = np.zeros((len(ts), 4))
-    q[0] = heading_from_direction(u[0])
-    for k in range(1, len(ts)):
-        q[k] = rot.normalize(rot.multiply(min_rotation(u[k - 1], u[k]), q[k - 1]))
+    q = transported_headings(heading_from_direction(u[0]), u)
     # angular velocity of the transported frame: w = u x du/dt (analytic from v, a)
     v = spline.evaluate(ts, 1)
     a = spline.evaluate(ts, 2)

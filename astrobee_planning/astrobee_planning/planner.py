@@ -20,7 +20,7 @@ from astrobee import rotations as rot
 from . import attitude
 from .boxes import NoRoute, OutsideSafeSet, SafeSet, safe_set
 from .global_planner import PlanningError, Spline, plan_position
-from .quaternion_poly import reorientation
+from .quaternion_poly import peak_rates_batch, reorientation
 from .trajectory import BezierPiece, Trajectory
 
 # Astrobee Motion action result codes (FACTS.md section 2)
@@ -155,8 +155,7 @@ def _blend_trajectory(spline, q0, q1, wmax, amax) -> Trajectory:
 def _face_forward_trajectory(spline, q0, q1, p0, p1, wmax, amax) -> Trajectory:
     for _ in range(10):
         pieces, h0, h1 = attitude.face_forward(spline, 0.0)
-        peaks_w = max(p.peak_rates(100)[0] for p in pieces)
-        peaks_a = max(p.peak_rates(100)[1] for p in pieces)
+        peaks_w, peaks_a = peak_rates_batch(pieces, 100)
         k = max(peaks_w / wmax, np.sqrt(peaks_a / amax))
         if k <= 0.995:
             break

@@ -65,3 +65,24 @@ def test_reorientation_within_limits_and_reaches_goal():
     q, w, a = p.evaluate([p.duration])
     assert rot.angle_between(q[0], q1) < 1e-9
     assert np.allclose(w, 0) and np.allclose(a, 0)
+
+
+def test_batched_transport_and_peak_rates_match_the_one_by_one_forms():
+    """attitude.transported_headings (prefix scan) equals the step-by-step parallel transport,
+    including a half turn; peak_rates_batch equals the max of each piece's peak_rates."""
+    from astrobee_planning import attitude
+    from astrobee_planning.quaternion_poly import peak_rates_batch
+    rng = np.random.default_rng(4)
+    u = np.cumsum(rng.normal(size=(300, 3)) * 0.05, axis=0) + [1.0, 0, 0]
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    u[7] = -u[6]
+    q = [attitude.heading_from_direction(u[0])]
+    for k in range(1, len(u)):
+        q.append(rot.normalize(rot.multiply(attitude.min_rotation(u[k - 1], u[k]), q[-1])))
+    np.testing.assert_allclose(attitude.transported_headings(q[0], u), np.array(q), atol=1e-12)
+    polys = [QuaternionPolynomial.from_boundary(rot.normalize(rng.normal(size=4)), rng.normal(size=3) * 0.1,
+                                                rng.normal(size=3) * 0.01, rot.normalize(rng.normal(size=4)),
+                                                rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.01, 3.0 + i)
+             for i in range(5)]
+    one = (max(p.peak_rates(150)[0] for p in polys), max(p.peak_rates(150)[1] for p in polys))
+    np.testing.assert_allclose(peak_rates_batch(polys, 150), one, rtol=1e-12)
