@@ -105,8 +105,42 @@ def broken(bag: bool) -> dict:
             "h_min": h_min}
 
 
+NODES = ("sim_node", "pd_controller_node", "safety_filter_node")
+
+
+def _cpu_seconds(root: int) -> dict[str, float]:
+    """CPU seconds (user + system) so far of the NODES processes below pid `root` (/proc)."""
+    import os
+    tick = os.sysconf("SC_CLK_TCK")
+    kids: dict[int, list[int]] = {}
+    stats: dict[int, tuple[str, float]] = {}
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            with open(f"/proc/{d}/cmdline", "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        kids.setdefault(int(fields[1]), []).append(int(d))
+        stats[int(d)] = (cmd, (int(fields[11]) + int(fields[12])) / tick)
+    out, todo = {}, [root]
+    while todo:
+        pid = todo.pop()
+        todo.extend(kids.get(pid, []))
+        cmd, cpu = stats.get(pid, ("", 0.0))
+        for name in NODES:
+            if f"sys.argv[0] = '{name}'" in cmd or f"{name} " in cmd.split("--ros-args")[0][-40:]:
+                out[name] = out.get(name, 0.0) + cpu
+    return out
+
+
 def graph_flight(safety: bool, run_dir: Path) -> dict:
-    """One launch of Node 2 -> JEM into run_dir: summary figures, wall time, recorded poses."""
+    """One launch of Node 2 -> JEM into run_dir: summary figures, wall time, recorded poses, and
+    the CPU seconds of the sim, the controller and the filter (sampled from /proc while they
+    run: a cost figure that machine load changes less than the real-time factor)."""
     from roszen import typestore
     from roszen.bag.reader import BagReader
     from roszen.testing import free_port
@@ -114,10 +148,17 @@ def graph_flight(safety: bool, run_dir: Path) -> dict:
            "scenario:=node2_to_jem", f"safety:={str(safety).lower()}", "--run-dir", str(run_dir),
            "--port", str(free_port())]
     t0 = time.monotonic()
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-    wall = time.monotonic() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"launch failed ({proc.returncode}): {proc.stdout[-1500:]}")
+    cpu: dict[str, float] = {}
+    with tempfile.TemporaryFile("w+") as log:
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True)
+        while proc.poll() is None:
+            for k, v in _cpu_seconds(proc.pid).items():
+                cpu[k] = max(cpu.get(k, 0.0), v)
+            time.sleep(0.25)
+        wall = time.monotonic() - t0
+        if proc.returncode != 0:
+            log.seek(0)
+            raise RuntimeError(f"launch failed ({proc.returncode}): {log.read()[-1500:]}")
     leg = json.loads((run_dir / "summary.json").read_text())["legs"][0]
     poses, diag = [], None
     for m in BagReader(run_dir / "bag").messages(["/loc/truth/pose", "/gnc/ctl/safety"]):
@@ -132,7 +173,7 @@ def graph_flight(safety: bool, run_dir: Path) -> dict:
     moved = np.linalg.norm(poses[:, 1:4] - poses[0, 1:4], axis=1) > 1e-3
     poses[:, 0] -= poses[np.argmax(moved), 0]          # t = 0 where the robot starts to move
     return {"safety": safety, "success": bool(leg["success"]), "rtf": leg["real_time_factor"],
-            "wall": wall, "poses": poses, "contacts": leg["contacts"],
+            "wall": wall, "poses": poses, "contacts": leg["contacts"], "cpu": cpu,
             "ticks": int(diag["ticks"]) if diag else None,
             "active": int(diag["active_ticks"]) if diag else None}
 
@@ -159,14 +200,15 @@ def graph_table(pairs: int) -> None:
     print("\nthe graph: astrobee launch cargo_transport scenario:=node2_to_jem safety:=..., lockstep, "
           "PD, 2 cores shared")
     hdr = (f"{'safety':<8}{'goal':>6}{'rtf':>7}{'wall (s)':>10}{'ticks':>8}{'intervened':>12}"
-           f"{'max dp (m)':>12}{'max dq (rad)':>14}")
+           f"{'max dp (m)':>12}{'max dq (rad)':>14}  CPU s: sim / controller / filter")
     print(hdr)
     print("-" * len(hdr))
     for r in runs:
         dp, dq = pose_difference(ref, r["poses"])
         print(f"{str(r['safety']).lower():<8}{'yes' if r['success'] else 'NO':>6}{r['rtf']:>7.1f}"
               f"{r['wall']:>10.1f}{r['ticks'] if r['ticks'] is not None else '-':>8}"
-              f"{r['active'] if r['active'] is not None else '-':>12}{dp:>12.2e}{dq:>14.2e}")
+              f"{r['active'] if r['active'] is not None else '-':>12}{dp:>12.2e}{dq:>14.2e}  "
+              + " / ".join(f"{r['cpu'].get(n, 0.0):.1f}" for n in NODES))
     for s in (False, True):
         rtf = [r["rtf"] for r in runs if r["safety"] == s]
         print(f"safety:={str(s).lower()}: real-time factor mean {np.mean(rtf):.1f}x over {len(rtf)}")
