@@ -88,16 +88,19 @@ class StudyStore:
         import yaml
         _write_atomic(self.folder / "study.yaml", yaml.safe_dump(study.source, sort_keys=False))
 
-    def done(self) -> dict[str, dict]:
-        """key -> record of every finished flight in the folder (unreadable files skipped)."""
+    def done(self, errors: bool = True) -> dict[str, dict]:
+        """key -> record of every finished flight in the folder (unreadable files skipped;
+        errors=False leaves out flights that ended in an error, to fly them again)."""
         out = {}
         if not self.flights_dir.is_dir():
             return out
         for p in sorted(self.flights_dir.glob("*.json")):
             try:
-                out[p.stem] = json.loads(p.read_text())
+                rec = json.loads(p.read_text())
             except (OSError, ValueError):
                 continue
+            if errors or rec.get("status") != "error":
+                out[p.stem] = rec
         return out
 
     def save(self, key: str, record: dict) -> None:
@@ -346,9 +349,12 @@ def run_study(study: Study | str | Path, folder: str | Path | None = None, *,
     folder = Path(folder) if folder is not None else default_folder(study)
     store = StudyStore(folder)
     store.prepare(study)
-    done = store.done()
+    done = store.done(errors=False)      # a flight that ended in an error is flown again
     unique = study.unique
-    todo = [f for k, f in unique.items() if k not in done]
+    # seed 0 of every flight first, then seed 1...: a stopped study covers every condition
+    rank = {s: i for i, s in enumerate(dict.fromkeys(f.spec["seed"] for f in study.flights))}
+    todo = sorted((f for k, f in unique.items() if k not in done),
+                  key=lambda f: (rank[f.spec["seed"]], f.index))
     if limit is not None:
         todo = todo[:max(0, int(limit))]
     resumed = len(unique) - len([k for k in unique if k not in done])

@@ -16,7 +16,9 @@
         grid: {controller: [pd, mpc_a], realism.disturbances.0.magnitude: [5, 10, 20]}
         random: {count: 4, seed: 1, draw: {realism.bag_stiffness_scale: {uniform: [0.1, 1]}}}
 
-Without `blocks`, a top-level `grid` / `random` / `set` is the one block. Flight parameters:
+A grid axis `case` takes a list of named parameter sets (`- {name: difficult, flight_mode:
+difficult}`): conditions that differ in several parameters, shown by name in the table.
+Blocks may share a name (their rows are reported together). Without `blocks`, a top-level `grid` / `random` / `set` is the one block. Flight parameters:
 scenario (a name of config/scenarios or an inline scenario mapping), controller (a label),
 safety, bag_model, bag_variant, bag_resolution, bag_mass, fem_solver, flight_mode, realism (a
 preset name or a mapping of knobs), state_source, time_limit, params (controller parameters
@@ -140,11 +142,11 @@ def _set_path(target: dict, path: str, value: Any, where: str) -> None:
         try:
             nxt = node[key]
         except (KeyError, IndexError, TypeError):
-            if isinstance(node, dict):
+            if isinstance(node, dict) and not parts[i + 1].isdigit():
                 nxt = node[key] = {}
             else:
-                raise StudyError(f"{where}: {path!r}: no {'.'.join(parts[:i + 1])!r} to set "
-                                 "(set the list first, e.g. in base)") from None
+                raise StudyError(f"{where}: {path!r}: {'.'.join(parts[:i + 1])!r} is not in "
+                                 "the list or mapping (set it first, e.g. in base)") from None
         node = nxt
     last = parts[-1]
     if isinstance(node, list):
@@ -310,10 +312,16 @@ def _expand_block(block: dict, bi: int, base: dict, seeds: list[int], controller
     bw = f"{where}: block {name!r}"
     _check_keys(block, BLOCK_KEYS, bw)
     fixed = _check_keys(block.get("set"), FLIGHT_KEYS, f"{bw} set")
-    grid = _check_keys(block.get("grid"), FLIGHT_KEYS | {"seed"}, f"{bw} grid")
+    grid = _check_keys(block.get("grid"), FLIGHT_KEYS | {"seed", "case"}, f"{bw} grid")
     for k, v in grid.items():
         if not isinstance(v, list) or not v:
             raise StudyError(f"{bw} grid: {k!r} must be a non-empty list, got {v!r}")
+    for i, case in enumerate(grid.get("case") or []):
+        if not isinstance(case, dict) or not isinstance(case.get("name"), str):
+            raise StudyError(f"{bw} grid: case {i} must be a mapping with a name and flight "
+                             f"parameters, got {case!r}")
+        _check_keys({k: v for k, v in case.items() if k != "name"}, FLIGHT_KEYS,
+                    f"{bw} grid case {case['name']!r}")
     random = block.get("random")
     draws: list[dict] = [{}]
     if random is not None:
@@ -338,9 +346,15 @@ def _expand_block(block: dict, bi: int, base: dict, seeds: list[int], controller
                 values = copy.deepcopy(base)
                 for src in (fixed, point, draw):
                     for k, v in src.items():
-                        _set_path(values, str(k), v, bw)
+                        if k == "case":      # several parameters at once, named
+                            for ck, cv in v.items():
+                                if ck != "name":
+                                    _set_path(values, str(ck), cv, bw)
+                        else:
+                            _set_path(values, str(k), v, bw)
                 values["seed"] = seed
-                swept = {k: v for k, v in {**point, **draw}.items() if k != "controller"}
+                swept = {k: (v["name"] if k == "case" else v)
+                         for k, v in {**point, **draw}.items() if k != "controller"}
                 out.append((values, _plain(swept), name))
     return out
 

@@ -1,0 +1,171 @@
+"""astrobee_lab.study: the sweep runner (serial, process pool, Ray), resume after a kill, bad
+study files, and one row re-flown through the graph."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from astrobee_lab import study_cli
+from astrobee_lab.study import read_table, run_study, table_without_costs
+from astrobee_lab.study_spec import StudyError, load_study
+
+pytest.importorskip("pybullet")
+
+Q = [0.0, 0.0, -0.7071067811865476, 0.7071067811865476]
+# 2 controllers x 2 seeds, rigid bag, a 0.5 m hop in Node 2 with the astrobee realism knobs:
+# about a second of CPU per flight
+SMALL = {
+    "name": "small",
+    "controllers": {"pd": {"controller": "pd"},
+                    "mpc_a": {"controller": "mpc", "params": {"model": "reduced", "samples": 16}}},
+    "base": {"scenario": {"name": "hop", "flight_mode": "nominal",
+                          "robots": [{"name": "", "position": [10.95, 0.4, 4.84], "orientation": Q}],
+                          "bag": {"model": "rigid", "variant": "front", "mass": 10.0},
+                          "goal": {"position": [10.95, -0.1, 4.84], "orientation": Q}},
+             "realism": "astrobee"},
+    "seeds": 2,
+    "grid": {"controller": ["pd", "mpc_a"]},
+}
+
+
+def write(tmp_path: Path, data: dict, name: str = "small.yaml") -> Path:
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(data, sort_keys=False))
+    return p
+
+
+def test_the_study_expands_to_the_grid_with_stable_keys(tmp_path):
+    s = load_study(write(tmp_path, SMALL))
+    assert [(f.label, f.spec["seed"]) for f in s.flights] == [("pd", 0), ("pd", 1),
+                                                              ("mpc_a", 0), ("mpc_a", 1)]
+    assert len({f.key for f in s.flights}) == 4
+    assert [f.key for f in load_study(write(tmp_path, SMALL, "again.yaml")).flights] == \
+        [f.key for f in s.flights]
+
+
+def test_serial_and_pool_give_the_same_table(tmp_path):
+    path = write(tmp_path, SMALL)
+    a = run_study(path, tmp_path / "serial", workers=1, progress=False)
+    b = run_study(path, tmp_path / "pool", workers=2, progress=False)
+    assert a.flown == b.flown == 4 and a.errors == b.errors == 0
+    ta, tb = read_table(a.table), read_table(b.table)
+    assert [r["label"] for r in ta] == ["pd", "pd", "mpc_a", "mpc_a"]
+    assert all(r["success"] is True for r in ta if r["label"] == "pd"), [r["cause"] for r in ta]
+    assert all(r["status"] == "ok" and r["seed"] in (0, 1) for r in ta)
+    assert table_without_costs(ta) == table_without_costs(tb)
+    report = (tmp_path / "serial" / "report.md").read_text()
+    assert "| pd | 2 | 100% (2/2) |" in report and "| mpc_a | 2 |" in report
+    assert (tmp_path / "serial" / "plots" / "clearance_block0.png").is_file()
+    again = run_study(path, tmp_path / "serial", workers=1, progress=False)
+    assert again.flown == 0 and again.resumed == 4
+
+
+def test_a_killed_study_resumes_and_never_flies_a_finished_flight_twice(tmp_path):
+    data = dict(SMALL, seeds=3)
+    path = write(tmp_path, data)
+    out = tmp_path / "study"
+    flights = out / "flights"
+    proc = subprocess.Popen([sys.executable, "-m", "astrobee_lab.study_cli", "run", str(path),
+                             "--out", str(out), "--workers", "2", "--quiet"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if flights.is_dir() and any(flights.glob("*.json")):
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the study ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)       # the runner and its pool workers
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    time.sleep(0.2)
+    with pytest.raises(ProcessLookupError):
+        os.killpg(proc.pid, 0)                    # nothing of the study left running
+    before = {p.stem: json.loads(p.read_text()) for p in flights.glob("*.json")}
+    assert 1 <= len(before) < 6
+    run = run_study(path, out, workers=1, progress=False)
+    assert run.resumed == len(before) and run.flown == 6 - len(before)
+    after = {p.stem: json.loads(p.read_text()) for p in flights.glob("*.json")}
+    assert set(after) == {f.key for f in load_study(path).flights}
+    for key, rec in before.items():               # untouched: not flown again
+        assert after[key] == rec
+    assert len(read_table(run.table)) == 6
+
+
+BAD = [
+    ("not: [valid", "not valid YAML"),
+    ({"name": "x", "grid": {"controller": ["pd"]}, "colour": 1}, "unknown key 'colour'"),
+    ({"grid": {"controller": ["lqr"]}}, "unknown controller 'lqr'"),
+    ({"controllers": {"a": {"controller": "lqr"}}, "grid": {"controller": ["a"]}},
+     "controller must be pd or mpc"),
+    ({"base": {"scenario": "no_such_place"}, "grid": {"controller": ["pd"]}}, "no_such_place"),
+    ({"base": {"realism": {"ekf_position_noise": -1}}, "grid": {"controller": ["pd"]}},
+     "ekf_position_noise"),
+    ({"grid": {"controller": "pd"}}, "must be a non-empty list"),
+    ({"controllers": {"m": {"controller": "mpc", "params": {"samples": 0}}},
+      "grid": {"controller": ["m"]}}, "samples must be a positive integer"),
+    ({"base": {"controller": "pd"}, "grid": {"realism.disturbances.0.magnitude": [5]}},
+     "is not in the list"),
+    ({"seeds": -1, "grid": {"controller": ["pd"]}}, "seeds must be"),
+    ({"grid": {"controller": ["pd"]}, "random": {"count": 2, "draw": {"bag_mass": {"normal": 1}}}},
+     "uniform"),
+]
+
+
+@pytest.mark.parametrize("content,needle", BAD)
+def test_bad_study_files_are_one_line_errors(tmp_path, capsys, content, needle):
+    p = tmp_path / "bad.yaml"
+    p.write_text(content if isinstance(content, str) else yaml.safe_dump(content))
+    with pytest.raises(StudyError):
+        load_study(p)
+    assert study_cli.main(["run", str(p), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("astrobee study: study "), err
+    assert needle in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_missing_file_and_bad_workers_are_one_line_errors(tmp_path, capsys):
+    assert study_cli.main(["run", str(tmp_path / "none.yaml")]) == 1
+    assert study_cli.main(["run", str(write(tmp_path, SMALL)), "--workers", "0"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].endswith("no such file") and "--workers must be >= 1" in err[1]
+
+
+def test_ray_gives_the_same_table(tmp_path):
+    ray = pytest.importorskip("ray")
+    path = write(tmp_path, SMALL)
+    a = run_study(path, tmp_path / "serial", workers=1, progress=False)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        b = run_study(path, tmp_path / "ray", ray="local", progress=False)
+    finally:
+        ray.shutdown()
+    assert b.flown == 4 and b.errors == 0
+    assert table_without_costs(read_table(a.table)) == table_without_costs(read_table(b.table))
+
+
+@pytest.mark.graph
+@pytest.mark.slow
+def test_a_row_reflown_through_the_graph_matches_its_study_row(tmp_path):
+    from astrobee_lab.study_reflow import reflow
+    data = dict(SMALL, seeds=[1], grid={"controller": ["pd"]})
+    run = run_study(write(tmp_path, data), tmp_path / "study", workers=1, progress=False)
+    assert run.flown == 1
+    res = reflow(tmp_path / "study", "0", timeout=240)
+    assert res.launch_rc == 0, (res.run_dir / "launch.log").read_text()[-2000:]
+    assert res.agrees, res.text()
+    assert res.leg["scenario"].startswith("study_") and res.leg["success"] is True
+    # the same seed reached the simulator: the realism knobs are in the graph's summary
+    assert (res.run_dir / "bag").is_dir() and (res.run_dir / "reflow.json").is_file()
