@@ -64,6 +64,7 @@ ARGUMENTS = {
     "robots": ("", "scenario override: comma-separated robot names (namespaces)"),
     "realism": ("", "realism preset of config/realism.yaml (off, astrobee, harsh; '' = the "
                 "scenario's): EKF noise, actuation noise + lag, bumps, told bag mass"),
+    "seed": ("0", "the simulator's seed (realism noise, bumps; as a study row's seed)"),
 }
 
 
@@ -139,6 +140,10 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         sim_params["lockstep_timeout"] = _number(ctx, "lockstep_timeout", float, "a number of seconds")
         if not sim_params["lockstep_timeout"] > 0:
             raise LaunchError("lockstep_timeout must be > 0")
+    if ctx.arg("seed"):
+        sim_params["seed"] = _number(ctx, "seed", int, "a non-negative integer")
+        if sim_params["seed"] < 0:
+            raise LaunchError("seed must be a non-negative integer")
     for key, value in overrides.items():     # the sim builds the scenario with the overrides
         sim_params[key] = ",".join(value) if isinstance(value, list) else value
     mission = ctx.flag("mission", True)
