@@ -54,10 +54,12 @@ def samples_from_bag(bag_dir: str | os.PathLike, namespace: str = "") -> list[Ta
                 faults.append((_ns(msg.header.stamp), f"{msg.source}: {msg.message} (code {msg.code})"))
         else:
             by[kind][_ns(msg.header.stamp)] = msg
-    start = next((t for t, s in mob if s == CONTROLLING), None)
-    if start is None:
+    first = next((i for i, (_, s) in enumerate(mob) if s == CONTROLLING), None)
+    if first is None:
         return []
-    end = next((t for t, s in mob if t >= start and s in ENDED), max(by["pose"], default=start))
+    start = mob[first][0]
+    # the first stop after CONTROLLING, in the order the states were published
+    end = next((t for t, s in mob[first:] if s in ENDED), max(by["pose"], default=start))
     out = []
     active: list[str] = []
     for t in sorted(k for k in by["pose"] if start <= k <= end):
