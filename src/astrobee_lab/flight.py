@@ -190,6 +190,7 @@ class Flight:
         self.plan_duration = math.nan
         self.planning_time = math.nan
         self.compute_s: list[float] = []
+        self._close_laws()
         self.laws = {n: self._law() for n in self.names}
         self.filters: dict[str, Any] = {}
         self._bag_keys: dict[str, Any] = {}
@@ -477,7 +478,16 @@ class Flight:
                 "robots": len(self.names), "flight_mode": self.mode.name, "controller": ctl, "safety": self.safety,
                 "realism": realism, "state_source": self.state_source, "seed": self.seed}
 
+    def _close_laws(self) -> None:
+        """Free what a law holds beyond memory (the MPC's pybullet rollout workers)."""
+        for law in getattr(self, "laws", {}).values():
+            close = getattr(getattr(law, "model", None), "close", None)
+            if callable(close):
+                close()
+        self.laws = {}
+
     def close(self) -> None:
+        self._close_laws()
         if self.sim is not None:
             self.sim.close()
             self.sim = None
