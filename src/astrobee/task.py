@@ -222,6 +222,24 @@ class TaskMonitor:
         if math.isfinite(s.bag_robot_speed) and not s.bag_robot_speed <= self.peak_bag_robot_speed:
             self.peak_bag_robot_speed = float(s.bag_robot_speed)
 
+    @classmethod
+    def from_figures(cls, task: Task, final: dict[str, tuple[float | None, float | None]],
+                     contacts: dict[str, int] | None = None,
+                     faults: dict[str, list[str]] | None = None,
+                     failure: str = "") -> "TaskMonitor":
+        """A monitor holding a leg's end figures instead of its samples (what the mission's
+        summary keeps): final (position, attitude) error per robot (None: no pose), contact
+        samples per touching body (robot_label()s, "bag"), faults per robot, a failure that
+        ended the leg. verdict() and robot_problems() then judge them."""
+        m = cls(task)
+        m.samples, m.t0, m.t = 1, 0.0, 0.0
+        m.final = {n: e for n, e in final.items()}
+        m.touch_samples = {b: int(n) for b, n in (contacts or {}).items() if n}
+        m.contact_samples = max(m.touch_samples.values(), default=0)
+        m.robot_faults = {r: list(f) for r, f in (faults or {}).items() if f}
+        m.failure = failure
+        return m
+
     def fail(self, cause: str) -> None:
         """The leg failed for a reason the samples cannot show (no plan, no state...)."""
         self.failure = self.failure or cause
@@ -249,10 +267,10 @@ class TaskMonitor:
             out.append(f"{touched} contact samples")
         tol_p, tol_a = self.task.tolerance_position, self.task.tolerance_attitude
         e_p, e_a = self.final.get(name, (None, None))
-        if e_p is None or not e_p <= tol_p:
+        if e_p is None or tol_p is None or not e_p <= tol_p:
             out.append("final position error " + (f"{e_p:.3f} m > {tol_p} m" if e_p is not None
                                                   else "unknown (no pose)"))
-        if e_a is None or not e_a <= tol_a:
+        if e_a is None or tol_a is None or not e_a <= tol_a:
             out.append("final attitude error " + (f"{e_a:.3f} rad > {tol_a} rad" if e_a is not None
                                                   else "unknown (no pose)"))
         return out
@@ -284,7 +302,9 @@ class TaskMonitor:
         failure before flight, the time limit, each robot's problems (named when there are
         several), the cargo bag's contacts."""
         parts = [self.failure] if self.failure else []
-        if self.samples == 0 and not self.failure:
+        if not self.task.goals and not self.failure:
+            parts.append("no robot flown")
+        elif self.samples == 0 and not self.failure:
             parts.append("no samples")
         if self.truncated:
             parts.append(f"time limit of {self.task.time_limit:g} s reached")

@@ -118,3 +118,36 @@ def test_reward_rewards_progress_and_penalises_contact_and_clearance():
     assert r_contact == pytest.approx(-w.contact - w.clearance * 1.0)
     r_goal = m.step(sample(4.0, goal, robot_clearance=0.5))
     assert r_goal > w.success - 1e-9 + 0.9     # progress of 1 m plus the bonus
+
+
+@pytest.mark.parametrize("case", ["ok", "far", "no_pose", "fault", "contacts", "two", "aborted",
+                                  "cargo"])
+def test_verdict_from_figures_is_the_summary_leg_verdict(case):
+    """The mission summary's leg_verdict and the Task judging the same end figures agree word
+    for word (what summary.py needs to call the Task instead of deciding itself)."""
+    summary = pytest.importorskip("astrobee_bringup.summary")
+    from astrobee.task import Goal, TaskMonitor
+    R = summary.RobotResult
+    robots = {"ok": [R("", final_position_error=0.01, final_attitude_error=0.02)],
+              "far": [R("", final_position_error=0.5, final_attitude_error=0.5)],
+              "no_pose": [R("")],
+              "fault": [R("", final_position_error=0.01, final_attitude_error=0.0,
+                          faults=["sim/propulsion_watchdog: gone (code 1)"])],
+              "contacts": [R("", final_position_error=0.01, final_attitude_error=0.0, contacts=3)],
+              "two": [R("", final_position_error=0.01, final_attitude_error=0.0),
+                      R("bumble", final_position_error=0.3, final_attitude_error=0.0, contacts=2)],
+              "aborted": [R("bumble", final_position_error=0.3, final_attitude_error=0.0)],
+              "cargo": [R("", final_position_error=0.01, final_attitude_error=0.0)]}[case]
+    cargo = 4 if case == "cargo" else 0
+    aborted = "flight aborted on a fault of robot bumble: x" if case == "aborted" else ""
+    expect = summary.leg_verdict(robots, 0.2, 0.3491, cargo, aborted)
+    zero = Goal(np.zeros(3), np.array([0, 0, 0, 1.0]))
+    task = Task({r.name: zero for r in robots}, 0.2, 0.3491)
+    touches = {summary.contact_name(r.name): r.contacts for r in robots}
+    touches["bag"] = cargo
+    m = TaskMonitor.from_figures(task, {r.name: (r.final_position_error, r.final_attitude_error)
+                                        for r in robots}, touches,
+                                 {r.name: r.faults for r in robots}, aborted)
+    assert m.verdict() == expect
+    for r in robots:
+        assert (not m.robot_problems(r.name)) == r.success
