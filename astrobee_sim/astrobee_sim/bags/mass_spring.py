@@ -69,6 +69,22 @@ def _edge_forces_loop(x, v, ei, ej, rest, ke, c, h, across):  # pragma: no cover
 
 
 _edge_forces_compiled = njit(cache=True)(_edge_forces_loop) if njit is not None else None
+_warm = False
+
+
+def warm_up() -> None:
+    """Load (or compile, the first time on a machine) the numba loops now, ~0.5-1.5 s once per
+    process, rather than inside the first step of a timed or lockstep run."""
+    global _warm
+    if _warm or _edge_forces_compiled is None:
+        return
+    z = np.zeros((2, 1, 3))
+    _edge_forces_compiled(z, z, np.zeros(1, np.int64), np.ones(1, np.int64), np.ones(1),
+                          np.ones(1), 0.1, 0.01, True)
+    from .node_contacts import _near_boxes
+    if _near_boxes is not None:
+        _near_boxes(np.zeros((2, 3)), np.zeros((1, 6)))
+    _warm = True
 
 
 def tet_edges(tets: np.ndarray) -> np.ndarray:
@@ -137,6 +153,7 @@ class MassSpring:
         self._ei = np.ascontiguousarray(i, dtype=np.int64)
         self._ej = np.ascontiguousarray(j, dtype=np.int64)
         self.use_numba = _edge_forces_compiled is not None
+        warm_up()
         self.rest = np.linalg.norm(self.rest_nodes[j] - self.rest_nodes[i], axis=1)
         e = len(self.edges)
         rows = np.repeat(np.arange(e), 2)
