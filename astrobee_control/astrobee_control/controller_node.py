@@ -315,6 +315,8 @@ class ControllerNode:
         now = self._last_stamp if self._last_stamp is not None else self._now()
         self.law.follow(traj, now)
         self.log.info(f"following a segment of {len(msg.segment)} states, {traj.duration:.1f} s")
+        # said at once (not at the next state): a paused sim's client waits for it to resume
+        self._publish_mob(f"segment of {traj.duration:.1f} s accepted", force=True, log=False)
 
     def _on_flight_mode(self, msg: Any) -> None:
         try:

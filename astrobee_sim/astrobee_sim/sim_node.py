@@ -29,6 +29,15 @@ steps on, the propulsion watchdog then acting as on the robot). Commands stamped
 `command_max_lead` (0.5 s) ahead of sim time are dropped with a rate-limited warning: after a
 reset sim time restarts at 0, so answers to pre-reset states land there; a reset also forgets
 the lockstep command stamps, and a command counts for the current tick at most.
+
+Deterministic lockstep (`start_paused:=true`, set by the launch when the mission runs in
+lockstep): the sim starts paused and publishes no state (only /clock, once a second of wall)
+until a client resets it; a reset leaves it paused with the state of t=0 published once; the
+state is never republished while waiting for commands (every subscriber was there before the
+first tick). /sim/control RESUME with `steps` > 0 runs until that many physics steps are done
+(rounded up to a publish tick), then pauses again; its reply's sim_time is the time it will
+pause at. The mission so hands a segment over at a fixed sim time and ends each leg at a tick
+the flight fixes, not the wall clock.
 """
 from __future__ import annotations
 
@@ -93,6 +102,7 @@ class SimOptions:
     realism: str = ""                 # preset name; "" = the scenario's own
     realism_overrides: tuple = ()     # ((knob, value), ...) given as realism.<knob>
     disturbance: Disturbance | None = None   # one pulse given by realism.disturbance_*
+    start_paused: bool = False        # paused until /sim/control RESUME; paused after a reset
 
     def realism_for(self, scenario: Scenario) -> Realism | None:
         """The realism the node forces on `scenario`, None when no realism parameter was given
@@ -178,6 +188,9 @@ def read_options(node: Any) -> SimOptions:
     gui = bool(par("gui", False))
     drag = bool(par("drag", False))
     realism, realism_overrides, disturbance = _read_realism(par)
+    start_paused = par("start_paused", False)
+    if not isinstance(start_paused, bool):
+        raise ParameterError(f"parameter start_paused must be true or false, got {start_paused!r}")
     overrides = {"bag_model": bag_model or None, "bag_variant": bag_variant or None,
                  "bag_resolution": bag_resolution or None, "bag_mass": bag_mass or None,
                  "fem_solver": fem_solver or None, "robots": robots,
@@ -185,7 +198,7 @@ def read_options(node: Any) -> SimOptions:
     return SimOptions(backend, scenario, overrides, int(seed), clock_mode, physics_rate,
                       publish_rate, mesh_rate, lockstep_timeout, lockstep_start_timeout,
                       command_max_lead, max_sim_time, gui, drag, realism, realism_overrides,
-                      disturbance)
+                      disturbance, start_paused=start_paused)
 
 
 def _read_realism(par: Any) -> tuple[str, tuple, Disturbance | None]:
@@ -295,7 +308,10 @@ class SimNode:
         n.create_service("astrobee_msgs/srv/SetFlightMode", "/sim/set_flight_mode",
                          lambda req: self._on_set_mode(req, None))
         n.create_service("astrobee_msgs/srv/SimControl", mc.SIM_CONTROL, self._on_control)
-        self.paused = False
+        self.start_paused = opts.start_paused
+        self.paused = opts.start_paused
+        self.pause_at_tick: int | None = None    # RESUME with steps: pause after this tick
+        self._last_clock = -1e9                  # wall time of the last paused /clock
         self.pending_steps = 0
         self.tick = 0
         self._last_mesh = -1e9
@@ -305,7 +321,8 @@ class SimNode:
         self.publish_markers()
         self.publish_scenario()
         self.publish_modes()
-        self.publish_state()
+        if not self.start_paused:      # paused: the first state comes with the client's reset
+            self.publish_state()
         self.publish_realism()
         bag = backend.scenario.bag
         self.log.info(f"sim up: scenario {backend.scenario.name}, robots {self.names}, "
@@ -403,6 +420,8 @@ class SimNode:
             io["cmd_stamp"], io["raw_stamp"], io["fault_state"] = -1, -1, None
         self.tick = 0
         self._wall0, self._sim0 = time.monotonic(), 0.0
+        if self.start_paused:          # deterministic runs: the client resumes when ready
+            self.paused, self.pause_at_tick = True, None
         self.publish_markers()
         self.publish_scenario()
         self.publish_modes()
@@ -416,12 +435,24 @@ class SimNode:
         R = self.roszen.response_class("astrobee_msgs/srv/SimControl")
         resp = R()
         if req.command == mc.SimControl.PAUSE:
-            self.paused = True
+            self.paused, self.pause_at_tick = True, None
             resp.message = "paused"
         elif req.command == mc.SimControl.RESUME:
+            steps = int(req.steps)
+            if steps > MAX_CONTROL_STEPS:
+                resp.success = False
+                resp.message = f"steps {steps} > {MAX_CONTROL_STEPS}: ask for fewer per request"
+                return resp
             self.paused = False
             self._wall0, self._sim0 = time.monotonic(), self.sim.time
             resp.message = "resumed"
+            if steps > 0:              # run a budget of physics steps, then pause again
+                self.pause_at_tick, t_pause = self._tick_after(steps)
+                resp.success = True
+                mc.set_stamp_ns(resp.sim_time, mc.to_ns(t_pause))
+                resp.message = f"resumed until t={t_pause:.3f} s"
+                return resp
+            self.pause_at_tick = None
         elif req.command == mc.SimControl.STEP:
             if not self.paused:
                 resp.success, resp.message = False, "STEP needs a paused simulation (send PAUSE first)"
@@ -440,6 +471,19 @@ class SimNode:
         resp.success = True
         mc.set_stamp_ns(resp.sim_time, self.now_ns())
         return resp
+
+    def _tick_after(self, steps: int) -> tuple[int, float]:
+        """The first publish tick at which `steps` more physics steps are done, and the sim
+        time then (summed step by step as the backend does, so equal to its stamp)."""
+        k, n, t, dt = self.tick, self.sim.steps, self.sim.time, self.sim.dt
+        goal = n + steps
+        while n < goal:
+            k += 1
+            m = max(1, int(round(k / self.publish_rate / dt)) - n)
+            n += m
+            for _ in range(m):
+                t += dt
+        return k, t
 
     # ---- publishing --------------------------------------------------------------------
     def now_ns(self) -> int:
@@ -709,7 +753,7 @@ class SimNode:
                 self._warn("lockstep", f"lockstep: no command for t={t / 1e9:.3f} s from {late} "
                            f"within {limit:g} s; stepping on")
                 return
-            if now >= next_pub:
+            if now >= next_pub and not self.start_paused:   # paused start: all were there
                 self.publish_state()
                 next_pub = now + 0.5
             self._drain(min(end - now, 0.02))
@@ -732,9 +776,16 @@ class SimNode:
                 return
             self._drain(0.0)
             if self.paused:
+                if self.start_paused and time.monotonic() - self._last_clock >= 1.0:
+                    self._last_clock = time.monotonic()      # sim time for late nodes and
+                    clk = self.M["clock"]()                   # the recorder (no state)
+                    mc.set_stamp_ns(clk.clock, self.now_ns())
+                    self.pub_clock.publish(clk)
                 self._drain(0.05)
                 continue
             self.run_tick()
+            if self.pause_at_tick is not None and self.tick >= self.pause_at_tick:
+                self.paused, self.pause_at_tick = True, None
             if self.clock_mode == "realtime":
                 ahead = (self.sim.time - self._sim0) - (time.monotonic() - self._wall0)
                 while ahead > 0:           # serve callbacks while waiting for the wall clock

@@ -13,10 +13,23 @@ With several scenarios (the demo) the legs fly one after the other in the same g
 simulation reset to each leg's scenario (/sim/reset) before it. Exit status: 0 when every leg
 succeeded, 1 when one failed, 2 for a bad argument, 130 when interrupted (SIGINT/SIGTERM).
 The launch description runs it as one of its processes (see astrobee_bringup/launch/cargo_transport.py).
+
+Deterministic lockstep (`--handover`, with sim_node's start_paused: the launch sets both in
+lockstep): every leg starts from a paused sim. The mission waits until the graph is ready (each
+robot's controller up, a recorder (`--await-recorder`) subscribed to every topic of the sim),
+resets the sim (the state of t=0 published once, to every node), plans from that state, hands
+the segments over stamped to start at t=0 + HANDOVER_LEAD and resumes the sim once every
+controller holds its segment; the sim then runs in chunks (/sim/control RESUME with steps) and
+the leg ends at the first chunk end after every robot stopped. Nothing depends on the wall
+clock: the same seed gives the same recording (tests/e2e/test_determinism_launch.py).
+
+Lost peers: the simulator, the planner or a flying robot's controller leaving the graph (even
+kill -9) fails the leg at once with "lost node <name>" (astrobee_bringup.peers).
 """
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import time
@@ -36,6 +49,8 @@ from astrobee_bringup.peers import PeerLost, PeerWatch
 IDLE, STOPPED, STOPPING, CONTROLLING = (mc.MotionState.IDLE, mc.MotionState.STOPPED,
                                         mc.MotionState.STOPPING, mc.MotionState.CONTROLLING)
 NAMES = mc.MotionState.NAMES
+PEERS = ("sim_node", "planner_node")     # nodes every leg needs (plus its controllers)
+MAX_RESUME_STEPS = 100_000              # sim_node's bound on one /sim/control request
 
 
 # After a fault (the sim's propulsion watchdog: the controller is gone) the leg ends once the
@@ -44,6 +59,11 @@ FAULT_WATCH_SIM, FAULT_WATCH_WALL = 0.5, 3.0
 # Formation segments start this far (sim s) after the request: every controller has its
 # segment before the common start stamp, so the robots start together.
 FORMATION_LEAD = 0.5
+# Deterministic runs: the segments start this long (sim s) after the reset's t=0 (the sim is
+# paused until every controller holds its segment, so no lead is needed), and the sim runs in
+# chunks of CHUNK_STEPS physics steps (1 s at the default 350 Hz) once the plan is flown.
+HANDOVER_LEAD = 0.0
+CHUNK_STEPS = 350
 
 
 class Interrupted(Exception):
@@ -153,8 +173,9 @@ class RobotWatch:
         self.fault_active: tuple[float, str] | None = None
         self.log = node.get_logger()
         node.create_subscription("geometry_msgs/msg/PoseStamped", pre + sm.POSE, self._on_pose, 10)
+        self.cmd_ns = -1                # stamp (ns) of the last command (any control mode)
         node.create_subscription("astrobee_msgs/msg/FamCommand", pre + sm.COMMAND,
-                                 lambda m: self.series.add_command(m), 10)
+                                 self._on_command, 10)
         node.create_subscription("astrobee_msgs/msg/ControlState", pre + sm.TRAJ,
                                  lambda m: self.series.add_traj(m), 10)
         # every state change counts: a deep queue (a depth-1 queue keeps only the newest of a
@@ -164,6 +185,10 @@ class RobotWatch:
         node.create_subscription("astrobee_msgs/msg/Fault", pre + mc.FAULT, self._on_fault,
                                  deep_latched)
         self.seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", pre + mc.SEGMENT, latched)
+
+    def _on_command(self, msg: Any) -> None:
+        self.cmd_ns = mc.stamp_ns(msg.header.stamp)
+        self.series.add_command(msg)
 
     def _on_pose(self, msg: Any) -> None:
         self.pose = (_vec(msg.pose.position), _quat(msg.pose.orientation))
@@ -216,7 +241,8 @@ class MissionClient:
     """The mission's node: per-robot watches, the cargo bag and contacts, planner and reset
     clients."""
 
-    def __init__(self, node: Any, namespace: str = "", stop_flag=None) -> None:
+    def __init__(self, node: Any, namespace: str = "", stop_flag=None, handover: bool = False,
+                 await_recorder: bool = False) -> None:
         import roszen
         from roszen import Durability, QoSProfile
 
@@ -225,8 +251,12 @@ class MissionClient:
         self.log = node.get_logger()
         self.ns = namespace.strip("/")
         self.stop_flag = stop_flag or (lambda: False)
-        # the simulator leaving the graph (killed, even -9) ends the wait at once, named
-        self.peers = PeerWatch(node, nodes=["sim_node"])
+        self.handover = handover                # deterministic lockstep (see the module doc)
+        self.await_recorder = await_recorder
+        # the simulator or planner (and, once a leg flies, its controllers) leaving the graph
+        # (killed, even -9) ends the wait at once, named
+        self.peers = PeerWatch(node, nodes=PEERS)
+        self.scenario_count = 0             # /sim/scenario messages received (one per reset)
         self.latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
         self.deep_latched = QoSProfile(depth=50, durability=Durability.TRANSIENT_LOCAL)
         self.watches: dict[str, RobotWatch] = {}
@@ -268,6 +298,7 @@ class MissionClient:
     # ---- callbacks ----------------------------------------------------------------------
     def _on_scenario(self, msg: Any) -> None:
         self.scenario_info = msg
+        self.scenario_count += 1
 
     def _on_realism(self, msg: Any) -> None:
         """/sim/realism (YAML: knobs, schedule, applied), recorded with each leg."""
@@ -356,7 +387,7 @@ class MissionClient:
         end = time.monotonic() + 0.3
         self.spin_until(lambda: time.monotonic() > end, 5.0, "in-flight commands")
         req = self.roszen.request_class("astrobee_msgs/srv/Reset")()
-        req.scenario, req.seed = name, 0
+        req.scenario, req.seed = name, self._seed()
         resp = self.call(self.reset_cli, req, ready_timeout, "/sim/reset")
         self.call(self.control_cli, resume, ready_timeout, "/sim/control (resume)")
         if not resp.success:
@@ -370,8 +401,107 @@ class MissionClient:
                                     for w, (c, p) in zip(ws, marks)), ready_timeout,
                         "the controller to take the reset")
 
+    def _seed(self) -> int:
+        """The seed the sim runs with (the launch's): legs after a reset keep it."""
+        return int(self.scenario_info.seed) if self.scenario_info is not None else 0
+
+    def _control(self, command: int, steps: int, timeout: float, what: str) -> Any:
+        req = self.roszen.request_class("astrobee_msgs/srv/SimControl")()
+        req.command, req.steps = command, steps
+        resp = self.call(self.control_cli, req, timeout, f"/sim/control ({what})")
+        if not resp.success:
+            raise MissionError(f"/sim/control ({what}) refused: {resp.message}")
+        return resp
+
+    def _graph_not_ready(self, robots: list[str]) -> str:
+        """Why the graph cannot take a deterministic leg yet ("" when it can): each robot's
+        controller up (its latched /mob/state) with a publisher of its command topic (a safety
+        filter subscribed to the controller's), a recorder on every topic of the sim."""
+        n = self.node
+        for r in robots:
+            w = self.watch(r)
+            cmd = mc.robot_topic(r, sm.COMMAND)
+            if w.mob_state is None:
+                return f"{w.named}: no controller ({mc.robot_topic(r, sm.MOB_STATE)})"
+            if n.count_publishers(cmd) == 0:
+                return f"{w.named}: no publisher of {cmd}"
+            if n.count_publishers(cmd + "_nominal") and not n.count_subscribers(cmd + "_nominal"):
+                return f"{w.named}: no subscriber of {cmd}_nominal"
+        if self.await_recorder:
+            for topic, _ in n.get_topic_names_and_types():
+                if any(p.startswith("_") for p in topic.split("/") if p):
+                    continue
+                if not any(e.node_name == "sim_node" for e in n.get_publishers_info_by_topic(topic)):
+                    continue
+                if not any("rosbag2_recorder" in e.node_name
+                           for e in n.get_subscriptions_info_by_topic(topic)):
+                    return f"no recorder subscribed to {topic}"
+        return ""
+
+    def _paused_reset(self, name: str, ready_timeout: float) -> None:
+        """Deterministic lockstep: with the sim paused and the graph ready, reset to `name`
+        (the state of t=0 published once, to every node) and wait until every controller has
+        answered it. A reset that built topics no recorder had yet (a robot new to this leg) is
+        repeated once the recorder has them."""
+        self.spin_until(lambda: self.scenario_info is not None, ready_timeout,
+                        "the simulator's scenario (/sim/scenario)")
+        self._control(mc.SimControl.PAUSE, 0, ready_timeout, "pause")
+        end = time.monotonic() + 0.3     # commands answering the last tick still on their way
+        self.spin_until(lambda: time.monotonic() > end, 5.0, "in-flight commands")
+        info = self.scenario_info
+        robots = list(info.robots) if info.name == name else \
+            list(Scenario.load(name).robot_names)
+        seed = self._seed()
+        for attempt in range(2):
+            self.spin_until(lambda: not self._graph_not_ready(robots), ready_timeout,
+                            lambda: f"the graph ready for {name} ({self._graph_not_ready(robots)})")
+            for r in robots:
+                self.watch(r).pose = None
+            count = self.scenario_count
+            req = self.roszen.request_class("astrobee_msgs/srv/Reset")()
+            req.scenario, req.seed = name, seed
+            resp = self.call(self.reset_cli, req, ready_timeout, "/sim/reset")
+            if not resp.success:
+                raise MissionError(f"/sim/reset to {name} failed: {resp.message}")
+            self.spin_until(lambda: self.scenario_count > count, ready_timeout,
+                            f"the simulator's description of {name} after its reset")
+            built = list(self.scenario_info.robots)
+            if not self._graph_not_ready(built) or attempt:
+                break
+            robots = built
+        ws = [self.watch(r) for r in self.scenario_info.robots]
+
+        def late() -> str:
+            return ", ".join(w.named for w in ws if w.pose is None or w.cmd_ns != mc.to_ns(w.sim_time))
+        self.spin_until(lambda: not late(), ready_timeout,
+                        lambda: f"the state of t=0 answered by every controller ({late()} did not)")
+
+    def _run_chunks(self, ws: list[RobotWatch], marks: dict[str, int], duration: float,
+                    wall_timeout: float, tick) -> None:
+        """Deterministic lockstep: resume for the plan's duration, then a chunk at a time, until
+        a chunk ends with every robot stopped (or a fault) before its last tick. The sim pauses
+        at each chunk's end; that the robots stopped is read once every controller has answered
+        the last tick, so the leg ends at a tick the flight fixes, whatever the wall clock."""
+        deadline = time.monotonic() + wall_timeout
+        steps = min(int(math.ceil((duration + 1.0) * CHUNK_STEPS)), MAX_RESUME_STEPS)
+        while True:
+            resp = self._control(mc.SimControl.RESUME, steps, 30.0, "resume")
+            t_end = mc.stamp_ns(resp.sim_time)
+            self.spin_until(lambda: all(w.cmd_ns >= t_end for w in ws),
+                            max(1.0, deadline - time.monotonic()), "the end of the flight", tick)
+            t = t_end * 1e-9
+            done = [w.done_since(marks[w.name]) for w in ws]
+            if (all(d is not None and d < t - 1e-9 for d in done)
+                    or any(f < t - 1e-9 for w in ws for f, _ in w.faults)):
+                return
+            steps = CHUNK_STEPS
+
     def _fly(self, name: str, reset: bool, progress: Progress, res: LegResult,
              wall_timeout: float, ready_timeout: float) -> None:
+        if self.handover:
+            progress.update(f"[mission] {name}: waiting for the graph, then the sim's reset")
+            self._paused_reset(name, ready_timeout)
+            reset = False
         if not reset and (self.scenario_info is None or self.scenario_info.name != name):
             self.spin_until(lambda: self.scenario_info is not None, ready_timeout,
                             "the simulator's scenario (/sim/scenario)")
@@ -418,6 +548,7 @@ class MissionClient:
         self.spin_until(lambda: not not_ready(), ready_timeout,
                         lambda: f"the robots at the start of {name} and their controllers ready "
                                 f"({not_ready()})")
+        self._watch_peers(ws)
         for w in ws:
             pos, q = w.pose
             self._starts[w.name] = [*pos.tolist(), *q.tolist()]
@@ -468,7 +599,12 @@ class MissionClient:
                         30.0, lambda: "the controllers to accept their segments (" + ", ".join(
                             w.named for w in ws if not w.controlling_since(marks[w.name]))
                         + " did not)", tick)
-        self.spin_until(finished, wall_timeout, "the end of the flight", tick)
+        if self.handover:       # every controller holds its segment: the sim may run
+            self._run_chunks(ws, marks, duration, wall_timeout, tick)
+            if any(w.faults for w in ws):
+                fault_seen.update(sim=self.sim_time, wall=time.monotonic())
+        else:
+            self.spin_until(finished, wall_timeout, "the end of the flight", tick)
         res.sim_t1, res.wall_t1 = self.sim_time, time.time()
         res.sim_time = self.sim_time - t_sent
         if fault_seen:
@@ -480,6 +616,14 @@ class MissionClient:
         res.duration = max(w.done_since(marks[w.name]) for w in ws) - t_acc
         wall = time.monotonic() - wall_sent
         res.real_time_factor = res.sim_time / wall if wall > 0 else None
+
+    def _watch_peers(self, ws: list[RobotWatch]) -> None:
+        """Watch the sim, the planner and the controllers of this leg's robots (the nodes
+        publishing their /mob/state) from now on."""
+        me = self.node.get_fully_qualified_name()
+        ctls = sorted({e.node_fqn for w in ws for e in self.node.get_publishers_info_by_topic(
+            mc.robot_topic(w.name, sm.MOB_STATE)) if e.node_fqn != me})
+        self.peers = PeerWatch(self.node, nodes=[*PEERS, *ctls])
 
     def _plan_one(self, w: RobotWatch, info: Any, fm: Any, goal_p, goal_q, res: LegResult):
         """PlanGlobal for one robot: ([segment], duration)."""
@@ -503,6 +647,11 @@ class MissionClient:
         seg.header.frame_id = "world"
         seg.flight_mode = fm.name
         seg.segment = list(plan.segment)
+        if self.handover:        # starts at a fixed sim time (the plan's times start at 0)
+            t0 = self.sim_time + HANDOVER_LEAD
+            for s in seg.segment:
+                mc.set_stamp_ns(s.when, mc.stamp_ns(s.when) + mc.to_ns(t0))
+            mc.set_stamp(seg.header.stamp, t0)
         return [seg], float(plan.duration)
 
     def _plan_formation(self, ws: list[RobotWatch], info: Any, fm: Any, goal_p, goal_q,
@@ -523,7 +672,7 @@ class MissionClient:
             req.bag_pose = self.bag_state.pose
             req.bag_size = info.bag_size
         req.flight_mode = fm.name
-        t_start = self.sim_time + FORMATION_LEAD
+        t_start = self.sim_time + (HANDOVER_LEAD if self.handover else FORMATION_LEAD)
         mc.set_stamp(req.start_time, t_start)
         plan = self.call(self.formation, req, 120.0, mc.PLANNER_FORMATION)
         res.planning_time = float(plan.planning_time)
@@ -628,7 +777,8 @@ def write_outputs(run_dir: Path, legs: list[LegResult], series: list[dict[str, s
 
 def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                 argv: list[str] | None = None, wall_timeout: float = 600.0,
-                ready_timeout: float = 90.0, stream=None) -> int:
+                ready_timeout: float = 90.0, stream=None, handover: bool = False,
+                await_recorder: bool = False) -> int:
     """Fly the scenarios in order in the running graph; write run_dir/summary.json + plots.
     Returns the process exit status (0 all legs succeeded, 1 failure, 130 interrupted)."""
     import roszen
@@ -652,7 +802,8 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
         args += ["--ros-args"]
     args += ["-p", "use_sim_time:=true"]
     node = roszen.Node("mission", namespace="", argv=args)
-    client = MissionClient(node, namespace, stop_flag=lambda: stop["flag"])
+    client = MissionClient(node, namespace, stop_flag=lambda: stop["flag"], handover=handover,
+                           await_recorder=await_recorder)
     progress = Progress(stream)
     legs: list[LegResult] = []
     all_series: list[dict[str, sm.Series]] = []
@@ -710,6 +861,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--namespace", default="", help="robot namespace of a one-robot scenario "
                    "(a scenario's robots come from /sim/scenario)")
     p.add_argument("--timeout", type=float, default=600.0, help="wall seconds per leg")
+    p.add_argument("--handover", action="store_true",
+                   help="deterministic lockstep: the sim was started paused (sim_node "
+                        "start_paused); each leg reset, handed over at a fixed sim time, run "
+                        "in chunks")
+    p.add_argument("--await-recorder", action="store_true",
+                   help="with --handover: wait for a bag recorder on every topic of the sim")
     a = p.parse_args(own)
     try:
         for name in a.scenario:
@@ -718,7 +875,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrobee mission: {exc}", file=sys.stderr)
         return 2
     run_dir = Path(a.run_dir) if a.run_dir else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    return run_mission(a.scenario, run_dir, a.namespace, ["mission", *ros], wall_timeout=a.timeout)
+    return run_mission(a.scenario, run_dir, a.namespace, ["mission", *ros], wall_timeout=a.timeout,
+                       handover=a.handover, await_recorder=a.await_recorder)
 
 
 if __name__ == "__main__":

@@ -148,6 +148,11 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         sim_params[key] = ",".join(value) if isinstance(value, list) else value
     mission = ctx.flag("mission", True)
     safety = ctx.flag("safety", False)
+    # deterministic lockstep: the sim paused until the mission has the graph ready and hands
+    # the segment over at a fixed sim time (mission --handover): the same seed, the same bag
+    handover = mission and clock == "lockstep"
+    if handover:
+        sim_params["start_paused"] = True
     port = ctx.port
     nodes = [
         NodeSpec("router", kind="router", command=["router", "--port", str(port)],
@@ -160,6 +165,8 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         per_robot = {"use_sim_time": True}
         if robot in shares:  # a bag held by several robots: each feeds forward its share
             per_robot["bag_mass"] = shares[robot]
+        if kinds[robot] == "mpc" and "seed" in sim_params:     # its sampling, seeded by the run's
+            per_robot["seed"] = sim_params["seed"]
         ctl_name = f"{kinds[robot]}_controller_node"
         nodes.append(NodeSpec(f"{robot}/{ctl_name}" if robot else ctl_name, "astrobee_control",
                               ctl_name, parameters=[ctl_params[kinds[robot]], per_robot], namespace=robot,
@@ -179,6 +186,8 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     if mission:
         import sys
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
+        if handover:
+            args += ["--handover"] + (["--await-recorder"] if ctx.flag("record", True) else [])
         nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
                               command=["run", "astrobee_bringup", "mission", *args],
                               ros2_command=[sys.executable, "-m", "astrobee_bringup.mission", *args]))
