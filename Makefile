@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test demo bench clean
+.PHONY: install test demo bench study clean
 
 install: $(STAMP)
 
@@ -38,6 +38,12 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
+
+# the controller study (issue 11): PD vs MPC-A vs MPC-B carrying the FEM bag with the realism
+# knobs on (studies/controller_study.yaml, 90 flights on every core; resumes where it stopped):
+# runs/study_controller_study/ results.csv, report.md, plots/
+study: $(STAMP)
+	$(PY) bench/controller_study.py --full
 
 clean:
 	rm -rf $(VENV) build *.egg-info runs
