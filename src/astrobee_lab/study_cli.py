@@ -8,6 +8,7 @@ graph.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -87,6 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     except StudyError as exc:
         print(f"astrobee study: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:            # `astrobee study run F --list | head`
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except KeyboardInterrupt:
         print("astrobee study: interrupted (finished flights are kept; run again to resume)",
               file=sys.stderr)

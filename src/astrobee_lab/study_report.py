@@ -153,6 +153,8 @@ def write_report(study: Any, rows: list[dict], folder: str | Path) -> Path:
               f"({sum(r.get('status') == 'error' for r in rows)} errors). "
               "Table: results.csv; per flight: flights/<key>.json.", ""]
     blocks = list(dict.fromkeys(f.block for f in study.flights))
+    if len(blocks) > 1 and rows:
+        lines += ["## All flights, per controller", "", block_table(rows, []), ""]
     for b in blocks:
         brows = [r for r in rows if r["block"] == b]
         swept = list(dict.fromkeys(c for f in study.flights if f.block == b for c in f.swept))
