@@ -345,7 +345,34 @@ class MissionClient:
                 if self.stop_flag():
                     raise Interrupted() from None
                 time.sleep(0.05)
-            raise MissionError(str(exc)) from None
+            lost = str(exc)
+            if "sim_node" not in lost:      # the sim's watchdog stops a robot left uncommanded:
+                why = self._watch_coasting()  # recorded and named, as any fault
+                if why:
+                    raise MissionError(f"{lost}; {why}") from None
+            raise MissionError(lost) from None
+
+    def _watch_coasting(self) -> str:
+        """After a lost peer: follow the flying robots until a fault of one has been watched
+        for FAULT_WATCH_SIM sim s (FAULT_WATCH_WALL wall s at most, from now); the fault's cause
+        ("flight aborted on a fault ..."), "" when none came."""
+        ws = [self.watches[n] for n in self.flying]
+        end = time.monotonic() + FAULT_WATCH_WALL
+        seen_at = None
+        while time.monotonic() < end:
+            if self.stop_flag():
+                raise Interrupted()
+            faulty = [w for w in ws if w.fault_active]
+            if faulty and seen_at is None:
+                seen_at = self.sim_time
+            if seen_at is not None and self.sim_time - seen_at >= FAULT_WATCH_SIM:
+                break
+            self.node.spin_once(timeout_sec=0.05)
+        first = next((w for w in ws if w.fault_active), None)
+        if first is None:
+            return ""
+        return (f"flight aborted on a fault of {first.named}: {first.fault_active[1]}"
+                if len(ws) > 1 else f"flight aborted on a fault: {first.fault_active[1]}")
 
     def call(self, client: Any, req: Any, timeout: float, what: str) -> Any:
         if not client.wait_for_service(timeout_sec=timeout):
@@ -838,8 +865,10 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
             pass
         for sig, h in old.items():
             signal.signal(sig, h)
+    # the last line names the cause: the launcher quotes it as the run's cause when we fail
     print(f"[mission] summary: {Path(run_dir) / 'summary.json'} "
-          f"({'success' if data['success'] else status})", file=stream or sys.stdout, flush=True)
+          f"({'success' if data['success'] else status + ': ' + str(data.get('reason', ''))})",
+          file=stream or sys.stdout, flush=True)
     return code
 
 

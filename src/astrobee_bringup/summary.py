@@ -1,6 +1,6 @@
 """Run summary: time series of a flight (live or read back from the recording), its figures of
 merit per robot, the verdict of a leg (`leg_verdict`: every robot at its goal, no contact, no
-fault), summary.json and the plot PNG (every robot's path over the labelled modules, tracking
+fault; decided by astrobee.task's TaskMonitor, so the mission and the Task never disagree), summary.json and the plot PNG (every robot's path over the labelled modules, tracking
 errors, clearance, and where and why a failed leg failed).
 
 Wording: "cargo bag" is the carried bag; "recording" is the rosbag2 directory of the run.
@@ -18,6 +18,9 @@ import numpy as np
 
 # Topics a flight's figures come from (relative to the robot namespace; msgconv names them).
 from astrobee.msgconv import COMMAND, MOB_STATE, POSE, TRAJ  # noqa: E402
+from astrobee.task import Goal, Task, TaskMonitor  # noqa: E402
+from astrobee.task import robot_label as contact_name  # noqa: E402,F401
+from astrobee.task import robot_named  # noqa: E402,F401
 CONTACTS = "sim/contacts"
 BAG_STATE = "sim/bag/state"
 
@@ -142,19 +145,14 @@ class Series:
                 "contact_samples": int(sum(self.in_contact))}
 
 
-def contact_name(robot: str) -> str:
-    """The name the simulator gives a robot in /sim/contacts ("robot" for the default one)."""
-    return robot or "robot"
+# contact_name(robot): the simulator's name of a robot in /sim/contacts ("robot" for the
+# default one); robot_named(robot): how reasons name it ("robot bumble", "the default robot");
+# both astrobee.task's, so the summary and the Task word a cause alike.
 
 
 def robot_label(robot: str) -> str:
     """How plots name a robot: its namespace, "robot" for the default one."""
     return contact_name(robot)
-
-
-def robot_named(robot: str) -> str:
-    """How reasons and log lines name a robot: "robot bumble", "the default robot"."""
-    return f"robot {robot}" if robot else "the default robot"
 
 
 @dataclass
@@ -178,46 +176,45 @@ class RobotResult:
     failed_at: dict[str, Any] | None = None     # {"t": sim s, "position": [x, y, z], "why": ...}
 
 
+def task_monitor(robots: list[RobotResult], tolerance_position: float | None,
+                 tolerance_attitude: float | None, cargo_contacts: int = 0,
+                 aborted: str = "") -> TaskMonitor:
+    """The Task's monitor holding a leg's end figures (astrobee.task decides, not this module):
+    each robot's final errors, contact samples and faults, the cargo bag's contacts, an abort."""
+    def goal(r: RobotResult) -> Goal:
+        g = list(r.goal) if len(r.goal) == 7 else [0.0] * 6 + [1.0]
+        return Goal(np.asarray(g[:3], float), np.asarray(g[3:], float))
+    task = Task({r.name: goal(r) for r in robots}, tolerance_position, tolerance_attitude)
+    touches = {contact_name(r.name): r.contacts for r in robots}
+    touches["bag"] = cargo_contacts
+    return TaskMonitor.from_figures(
+        task, {r.name: (r.final_position_error, r.final_attitude_error) for r in robots},
+        touches, {r.name: list(r.faults) for r in robots}, aborted)
+
+
 def robot_problems(r: RobotResult, tolerance_position: float | None,
                    tolerance_attitude: float | None) -> list[str]:
     """What keeps one robot from success in a leg (empty: it reached its goal within the
-    tolerances, with no contact and no fault). The one place this is decided (Task later)."""
-    out = []
-    if r.faults:
-        out.append(f"fault: {'; '.join(r.faults)}")
-    if r.contacts:
-        out.append(f"{r.contacts} contact samples")
-    e, a = r.final_position_error, r.final_attitude_error
-    if e is None or tolerance_position is None or e > tolerance_position:
-        out.append("final position error " + (f"{e:.3f} m > {tolerance_position} m" if e is not None
-                                               else "unknown (no pose)"))
-    if a is None or tolerance_attitude is None or a > tolerance_attitude:
-        out.append("final attitude error " + (f"{a:.3f} rad > {tolerance_attitude} rad" if a is not None
-                                              else "unknown (no pose)"))
-    return out
+    tolerances, with no contact and no fault): the Task's judgement of its figures."""
+    return task_monitor([r], tolerance_position, tolerance_attitude).robot_problems(r.name)
 
 
 def leg_verdict(robots: list[RobotResult], tolerance_position: float | None,
                 tolerance_attitude: float | None, cargo_contacts: int = 0,
                 aborted: str = "") -> tuple[bool, str]:
     """A leg succeeds only if every robot reaches its goal with no contact and no fault, and the
-    cargo bag touches nothing. Sets each robot's success/reason/reached_goal; returns (success,
-    reason), the reason naming each failing robot (single robot: its problems alone)."""
-    parts = [aborted] if aborted else []
+    cargo bag touches nothing (the Task's verdict of the leg's end figures). Sets each robot's
+    success/reason/reached_goal; returns (success, reason), the reason naming each failing robot
+    (single robot: its problems alone)."""
+    if not robots:
+        return False, aborted or "no robot flown"
+    monitor = task_monitor(robots, tolerance_position, tolerance_attitude, cargo_contacts, aborted)
     for r in robots:
-        probs = robot_problems(r, tolerance_position, tolerance_attitude)
+        probs = monitor.robot_problems(r.name)
         r.reached_goal = not any(p.startswith("final") for p in probs)
         r.success = not probs
         r.reason = "goal reached" if not probs else "; ".join(probs)
-        if probs and not aborted:
-            parts.append("; ".join(probs) if len(robots) == 1 else
-                         f"{robot_named(r.name)}: {'; '.join(probs)}")
-    if cargo_contacts:
-        parts.append(f"cargo bag: {cargo_contacts} contact samples")
-    ok = not parts and bool(robots)
-    if not robots and not parts:
-        parts.append("no robot flown")
-    return ok, "goal reached" if ok else "; ".join(parts)
+    return monitor.verdict()
 
 
 def run_verdict(legs: list[dict[str, Any]]) -> tuple[bool, str]:
