@@ -20,7 +20,14 @@ is still there (a paused or hung sim) /mob/state and one log line say so and the
 alone (a paused sim resumes the segment). The first state afterwards re-holds its pose.
 
 Parameters are either applied at run time (flight_mode, bag_mass, bag_size, truth_omega_frame,
-candidates_rate, state_timeout, settle_time) or read-only (state_source and the law's others).
+candidates_rate, state_timeout, settle_time) or read-only (state_source, safety, safety_margin
+and the law's others).
+
+With `safety:=true` the node filters its own command through the CBF safety filter
+(safety.LawFilter: the same filter, keep-in boxes, carried-bag extent and flight-mode limits as
+safety_filter_node, with the state the law was given) before publishing it, and publishes the
+filter's latched diagnostics on <ns>/gnc/ctl/safety as safety_filter_node does: no process and
+no hop of its own in the lockstep loop (issue 16).
 """
 from __future__ import annotations
 
@@ -54,6 +61,8 @@ COMMON_PARAMETERS: dict[str, Any] = {
     "truth_omega_frame": "world",   # frame of loc/truth/twist's angular velocity: world | body
     "candidates_rate": 2.0,         # Hz at most for /gnc/ctl/candidates (0: never)
     "state_timeout": 1.0,           # wall s without a state before /mob/state reports it stale
+    "safety": False,                # filter the command through the CBF safety filter in-process
+    "safety_margin": 0.05,          # m the filter's boundary sits outside the keep-in boxes
 }
 PEER_CHECK_PERIOD = 0.1             # wall s between two looks at the graph and the state's age
 TOKEN_SETTLE = 0.3                  # wall s a node may keep its token after its topic's went
@@ -168,6 +177,7 @@ class ControllerNode:
         mode = flight_modes.get(str(values["flight_mode"]) or None)
         law_params = {k: values[k] for k in (parameters or {})}
         self.law: ControlLaw = make_law(mode, mp.robot(), law_params)
+        self.safety = self._make_safety(values["safety"], values["safety_margin"])
         self._last_stamp: float | None = None
         self._last_state: State | None = None
         self._last_segment_key: tuple[int, int] | None = None
@@ -206,9 +216,24 @@ class ControllerNode:
         self.Trigger = roszen.response_class("std_srvs/srv/Trigger")
         n.create_service("std_srvs/srv/Trigger", mc.CTL_STOP, self._on_stop)
         n.create_timer(PEER_CHECK_PERIOD, self._watch_peers, clock=roszen.Clock(False))
+        self.safety_diagnostics = None
+        if self.safety is not None:
+            from .safety_filter_node import SafetyDiagnostics
+            self.safety_diagnostics = SafetyDiagnostics(n, self.safety)
         self._publish_mob("", force=True)
         self.log.info(f"{self.law.name} controller up: flight mode {self.law.flight_mode.name}, "
-                      f"state from {self.state_source}")
+                      f"state from {self.state_source}"
+                      + (f", CBF safety filter in-process (margin {self.safety.filter.margin:.2f} m)"
+                         if self.safety is not None else ""))
+
+    def _make_safety(self, on: Any, margin: Any) -> Any:
+        """The in-process safety filter (safety.LawFilter) when `on`, else None."""
+        if not isinstance(on, bool):
+            raise ValueError(f"safety must be true or false, not {on!r}")
+        if not on:
+            return None
+        from .safety.law_filter import LawFilter, check_margin
+        return LawFilter(self.law.flight_mode, mp.robot(), margin=check_margin(margin))
 
     # ---- parameters -------------------------------------------------------------------
     def _parameter_descriptors(self) -> dict[str, Any]:
@@ -332,6 +357,8 @@ class ControllerNode:
         except (ValueError, AttributeError, TypeError) as exc:
             self.log.warn(f"bad bag state dropped: {exc}")
             return
+        if self.safety is not None:       # the filter's envelope: the held bag's extent
+            self.safety.observe_bag(obs, state)
         if obs is None:
             if self._carrying:
                 self.law.observe_bag(None, state)
@@ -412,18 +439,36 @@ class ControllerNode:
         dt = 1.0 / 62.5 if self._last_stamp is None else min(max(t - self._last_stamp, 0.0), 0.1)
         self._last_stamp, self._last_state = t, state
         step = self.law.update(state, t, dt)
-        self._publish_command(step, stamp)
+        self._publish_command(step, stamp, self._filtered(step, state, stamp, t))
         self._publish_traj(step, stamp)
         self._publish_candidates(step, stamp, t)
         self._publish_mob(step.event, force=bool(step.event))
 
-    def _publish_command(self, step: Any, stamp: Any) -> None:
+    def _filtered(self, step: Any, state: State, stamp: Any, t: float) -> Any:
+        """(force, torque) through the in-process safety filter, or None without one. A filter
+        error (a non-finite law output) sends the maximum braking wrench and says so."""
+        lf = self.safety
+        if lf is None:
+            return None
+        if lf.mode is not self.law.flight_mode:     # a segment's, a topic's or a parameter's
+            lf.set_flight_mode(self.law.flight_mode)
+        try:
+            res = lf.apply(step.output.force, step.output.torque, state)
+        except (ValueError, ArithmeticError) as exc:
+            self.log.warn(f"safety filter: {exc}: sending the maximum braking wrench")
+            return lf.filter.braking_wrench(state.velocity, state.omega, state.orientation)
+        self.safety_diagnostics.publish(res, stamp, t)
+        return res.force, res.torque
+
+    def _publish_command(self, step: Any, stamp: Any, wrench: Any = None) -> None:
+        """The law's command; `wrench` (force, torque), when given, replaces its wrench."""
         out = step.output
+        force, torque = (out.force, out.torque) if wrench is None else wrench
         m = self.FamCommand()
         m.header.stamp = stamp
         m.header.frame_id = "body"
-        mc.set_vec(m.wrench.force, out.force)
-        mc.set_vec(m.wrench.torque, out.torque)
+        mc.set_vec(m.wrench.force, force)
+        mc.set_vec(m.wrench.torque, torque)
         mc.set_vec(m.accel, out.accel)
         mc.set_vec(m.alpha, out.alpha)
         m.status = 3 if out.saturated else 0

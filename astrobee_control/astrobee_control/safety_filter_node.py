@@ -13,6 +13,11 @@ WARN when the filter changed the command, ERROR when it fell back to the maximum
 values active, delta_norm, slack, min_barrier, omega_barrier (w_max^2 - |w|^2), fallback, reason), published when the
 active/fallback state changes and at most `diagnostics_rate` Hz otherwise.
 
+The filtering itself (carried bag, counters, diagnostics' content) is safety.LawFilter, which a
+controller_node with `safety:=true` runs in its own process (no extra hop; the launch's default
+way): this node is for a controller that is not ours (`astrobee launch cargo_transport
+safety:=node`). Both publish the same diagnostics through SafetyDiagnostics (below).
+
 Callbacks never raise: a bad or non-finite sample is logged and dropped.
 """
 from __future__ import annotations
@@ -26,27 +31,67 @@ from astrobee import msgconv as mc
 from roszen import node_main
 from roszen.parameters import read_only, runtime
 
-from . import mass as mp
 from .controller_node import CarriedBag, ekf_state, size_override
 from .pd import State
-from .safety import SafetyFilter, box_corners, carried_load
+from .safety.law_filter import DEFAULT_MARGIN, LawFilter, SafetyResult
 
 COMMAND_NOMINAL = "gnc/ctl/command_nominal"   # the controller's command, before the filter
 SAFETY = "gnc/ctl/safety"                     # latched diagnostics (DiagnosticArray)
-OK, WARN, ERROR = 0, 1, 2                     # diagnostic_msgs/DiagnosticStatus levels
 STATE_MAX_AGE = 0.5                           # s of sim time: an older state is not used
 
 PARAMETERS: dict[str, Any] = {
     "flight_mode": "",              # "" = nominal until /mob/flight_mode says otherwise
-    "margin": 0.05,                 # m the filter's boundary sits outside the keep-in boxes
+    "margin": DEFAULT_MARGIN,       # m the filter's boundary sits outside the keep-in boxes
     "bag_mass": -1.0,               # kg; < 0 = the scenario's
     "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
     "diagnostics_rate": 2.0,        # Hz at most for unchanged diagnostics
 }
 
 
+class SafetyDiagnostics:
+    """The latched <ns>/gnc/ctl/safety publisher of a node that filters through a LawFilter
+    (this node, or a controller_node with safety:=true): one DiagnosticStatus named
+    "safety_filter", the node's namespace as hardware_id, the LawFilter's level, message and
+    values; on a state change and at the LawFilter's pace, with one log line per change."""
+
+    def __init__(self, node: Any, law_filter: LawFilter) -> None:
+        import roszen
+        from roszen import LATCHED
+
+        M = roszen.message_class
+        self.DiagnosticArray = M("diagnostic_msgs/msg/DiagnosticArray")
+        self.DiagnosticStatus = M("diagnostic_msgs/msg/DiagnosticStatus")
+        self.KeyValue = M("diagnostic_msgs/msg/KeyValue")
+        self.node, self.log, self.lf = node, node.get_logger(), law_filter
+        self.pub = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", SAFETY, LATCHED)
+
+    def publish(self, res: SafetyResult, stamp: Any, t: float) -> None:
+        """Publish the diagnostics of `res` (stamped `stamp`, sim time t) when they are due."""
+        if not self.lf.diagnostics_due(res, t):
+            return
+        line = self.lf.transition(res)
+        if line:
+            self.log.info(line)
+        level, message, pairs = self.lf.status(res)
+        st = self.DiagnosticStatus()
+        st.level = level
+        st.name = "safety_filter"
+        st.hardware_id = self.node.get_namespace() if hasattr(self.node, "get_namespace") else ""
+        st.message = message
+        kvs = []
+        for k, v in pairs:
+            kv = self.KeyValue()
+            kv.key, kv.value = k, v
+            kvs.append(kv)
+        st.values = kvs
+        arr = self.DiagnosticArray()
+        arr.header.stamp = stamp
+        arr.status = [st]
+        self.pub.publish(arr)
+
+
 class SafetyFilterNode:
-    """Wiring of one SafetyFilter to topics."""
+    """Wiring of one LawFilter to topics."""
 
     def __init__(self, argv: list[str] | None = None) -> None:
         import roszen
@@ -57,28 +102,17 @@ class SafetyFilterNode:
         values = {k: n.declare_parameter(k, d, self._descriptor(k)).value
                   for k, d in PARAMETERS.items()}
         mode = flight_modes.get(str(values["flight_mode"]) or None)
-        margin = float(values["margin"])
-        if not (np.isfinite(margin) and 0.0 <= margin < 0.5):
-            raise ValueError(f"margin must be in [0, 0.5) m, not {margin}")
         self.bag = CarriedBag(values["bag_mass"], values["bag_size"])
-        self._set_diagnostics_rate(float(values["diagnostics_rate"]))
-        self.robot_mass = mp.robot()
-        self.filter = SafetyFilter(mode, self.robot_mass, margin=margin)
-        self.extent: list = []
-        self._bag_key: tuple | None = None       # rounded offset/rotation of the carried bag
+        self.lf = LawFilter(mode, margin=float(values["margin"]),
+                            diagnostics_rate=float(values["diagnostics_rate"]))
+        self.filter = self.lf.filter
         self._state: State | None = None
         self._state_t: float | None = None
-        self._diag_key: tuple[bool, bool] | None = None
-        self._diag_t = -1e9
-        self.ticks = self.active_ticks = self.fallback_ticks = 0
 
         M = roszen.message_class
         self.FamCommand = M("astrobee_msgs/msg/FamCommand")
-        self.DiagnosticArray = M("diagnostic_msgs/msg/DiagnosticArray")
-        self.DiagnosticStatus = M("diagnostic_msgs/msg/DiagnosticStatus")
-        self.KeyValue = M("diagnostic_msgs/msg/KeyValue")
         self.pub_cmd = n.create_publisher("astrobee_msgs/msg/FamCommand", mc.COMMAND, 10)
-        self.pub_diag = n.create_publisher("diagnostic_msgs/msg/DiagnosticArray", SAFETY, LATCHED)
+        self.diagnostics = SafetyDiagnostics(n, self.lf)
         n.create_subscription("astrobee_msgs/msg/EkfState", mc.EKF, self._on_ekf, 10)
         n.create_subscription("astrobee_msgs/msg/FlightMode", mc.FLIGHT_MODE, self._on_flight_mode,
                               LATCHED)
@@ -86,15 +120,19 @@ class SafetyFilterNode:
                               LATCHED)
         n.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
         n.create_subscription("astrobee_msgs/msg/FamCommand", COMMAND_NOMINAL, self._on_command, 10)
-        self.log.info(f"safety filter up: flight mode {mode.name}, margin {margin:.2f} m, "
-                      f"{len(self.filter.boxes)} candidate boxes")
+        self.log.info(f"safety filter up: flight mode {mode.name}, margin "
+                      f"{self.filter.margin:.2f} m, {len(self.filter.boxes)} candidate boxes")
+
+    @property
+    def ticks(self) -> int:
+        return self.lf.ticks
 
     # ---- parameters -------------------------------------------------------------------
     def _descriptor(self, name: str) -> Any:
         """flight_mode, bag_mass, bag_size and diagnostics_rate are applied at run time; margin
         is read-only (the candidate boxes are grown by it once, at start)."""
         if name == "flight_mode":
-            return runtime(lambda v: self.filter.set_flight_mode(flight_modes.get(str(v) or None)),
+            return runtime(lambda v: self.lf.set_flight_mode(flight_modes.get(str(v) or None)),
                            validator=lambda v: flight_modes.get(str(v) or None))
         if name == "bag_mass":
             return runtime(lambda v: setattr(self.bag, "mass_param", float(v)))
@@ -102,16 +140,13 @@ class SafetyFilterNode:
             return runtime(lambda v: setattr(self.bag, "size_param", size_override(v)),
                            validator=size_override)
         if name == "diagnostics_rate":
-            return runtime(self._set_diagnostics_rate, min_value=0.0)
+            return runtime(lambda v: self.lf.set_diagnostics_rate(float(v)), min_value=0.0)
         return read_only()
-
-    def _set_diagnostics_rate(self, rate: float) -> None:
-        self.diag_period = 1.0 / rate if rate > 0 else float("inf")
 
     # ---- inputs -----------------------------------------------------------------------
     def _on_flight_mode(self, msg: Any) -> None:
         try:
-            self.filter.set_flight_mode(flight_modes.get(msg.name))
+            self.lf.set_flight_mode(flight_modes.get(msg.name))
             self.log.info(f"flight mode {msg.name}")
         except (flight_modes.UnknownFlightMode, AttributeError, TypeError, ValueError) as exc:
             self.log.error(f"flight mode dropped: {exc}")
@@ -123,12 +158,10 @@ class SafetyFilterNode:
             self.log.warn(f"bad scenario description dropped: {exc}")
             return
         if self.bag.scenario is None:
-            self._release()
+            self._log_bag(self.lf.release())
 
-    def _release(self) -> None:
-        if self._bag_key is not None:
-            self.filter.set_mass(self.robot_mass)
-            self.extent, self._bag_key = [], None
+    def _log_bag(self, event: str) -> None:
+        if event == "released":
             self.log.info("bag released: robot envelope only")
 
     def _on_bag(self, msg: Any) -> None:
@@ -138,20 +171,12 @@ class SafetyFilterNode:
             obs = self.bag.observe(msg) if state is not None else None
             if obs is None:
                 if not attached:
-                    self._release()
+                    self._log_bag(self.lf.release())
                 return
-            offset, r_rel = obs.offset_in(state)
-            # a held bag sways by millimetres: rebuild the envelope only when it moved by 1 cm
-            key = (tuple(np.round(offset, 2)), tuple(np.round(r_rel, 2).ravel()), obs.mass)
-            if key == self._bag_key:
-                return
-            mprops, com = carried_load(self.robot_mass, obs.mass, obs.size, offset, r_rel)
-            self.filter.set_mass(mprops, com)
-            self.extent = box_corners(offset, obs.size, r_rel)
-            if self._bag_key is None:
+            if self.lf.observe_bag(obs, state) == "attached":
+                offset, _ = obs.offset_in(state)
                 self.log.info(f"bag attached: {obs.mass:.1f} kg at "
                               f"{np.round(offset, 3).tolist()} m (body frame)")
-            self._bag_key = key
         except (ValueError, AttributeError, TypeError) as exc:
             self.log.warn(f"bad bag state dropped: {exc}")
 
@@ -184,7 +209,7 @@ class SafetyFilterNode:
             self.pub_cmd.publish(msg)
             return
         try:
-            res = self.filter.filter(f_nom, t_nom, state, extent=self.extent)
+            res = self.lf.apply(f_nom, t_nom, state)
         except (ValueError, ArithmeticError) as exc:
             self.log.warn(f"nominal command dropped: {exc}")
             return
@@ -196,47 +221,7 @@ class SafetyFilterNode:
         mc.set_vec(out.wrench.force, res.force)
         mc.set_vec(out.wrench.torque, res.torque)
         self.pub_cmd.publish(out)
-        self.ticks += 1
-        self.active_ticks += bool(res.active)
-        self.fallback_ticks += bool(res.fallback)
-        self._publish_diagnostics(res, msg.header.stamp, t)
-
-    def _publish_diagnostics(self, res: Any, stamp: Any, t: float) -> None:
-        key = (bool(res.active), bool(res.fallback))
-        if key == self._diag_key and t - self._diag_t < self.diag_period:
-            return
-        if key != self._diag_key:
-            what = ("fallback: maximum braking" + (f" ({res.reason})" if res.reason else "")
-                    if res.fallback else "active" if res.active else "transparent")
-            self.log.info(f"safety filter {what} (min barrier {res.min_barrier:.3f} m)")
-        self._diag_key, self._diag_t = key, t
-        level = ERROR if res.fallback else WARN if res.active else OK
-        st = self.DiagnosticStatus()
-        st.level = level
-        st.name = "safety_filter"
-        st.hardware_id = self.node.get_namespace() if hasattr(self.node, "get_namespace") else ""
-        st.message = ("fallback: maximum braking wrench" if res.fallback
-                      else "active: command changed" if res.active else "transparent")
-        pairs = [("active", str(bool(res.active)).lower()),
-                 ("delta_norm", f"{res.delta_norm:.6g}"),
-                 ("slack", f"{res.slack:.6g}"),
-                 ("min_barrier", f"{res.min_barrier:.6g}"),
-                 ("omega_barrier", f"{res.omega_barrier:.6g}"),
-                 ("fallback", str(bool(res.fallback)).lower()),
-                 ("reason", res.reason or ""),
-                 ("ticks", str(self.ticks)),
-                 ("active_ticks", str(self.active_ticks)),
-                 ("fallback_ticks", str(self.fallback_ticks))]
-        kvs = []
-        for k, v in pairs:
-            kv = self.KeyValue()
-            kv.key, kv.value = k, v
-            kvs.append(kv)
-        st.values = kvs
-        arr = self.DiagnosticArray()
-        arr.header.stamp = stamp
-        arr.status = [st]
-        self.pub_diag.publish(arr)
+        self.diagnostics.publish(res, msg.header.stamp, t)
 
 
 def main(argv: list[str] | None = None) -> int:

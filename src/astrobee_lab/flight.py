@@ -192,12 +192,10 @@ class Flight:
         self.compute_s: list[float] = []
         self._close_laws()
         self.laws = {n: self._law() for n in self.names}
-        self.filters: dict[str, Any] = {}
-        self._bag_keys: dict[str, Any] = {}
-        self._extent: dict[str, list] = {n: [] for n in self.names}
+        self.filters: dict[str, Any] = {}        # robot -> safety.LawFilter (as the nodes')
         if self.safety:
-            from astrobee_control.safety import SafetyFilter
-            self.filters = {n: SafetyFilter(self.mode, mp.robot(), margin=0.05) for n in self.names}
+            from astrobee_control.safety import LawFilter
+            self.filters = {n: LawFilter(self.mode, mp.robot()) for n in self.names}
         self._bag_obs: dict[str, Any] = {n: None for n in self.names}
         self._told_mass = self._bag_mass()
         self._fault_t: float | None = None
@@ -307,7 +305,7 @@ class Flight:
         wrench = np.concatenate([step.output.force, step.output.torque])
         filt = self.filters.get(n)
         if filt is not None:
-            res = filt.filter(wrench[:3], wrench[3:], state, extent=self._extent[n])
+            res = filt.apply(wrench[:3], wrench[3:], state)
             wrench = np.concatenate([res.force, res.torque])
         if not hold_only:
             self.compute_s.append(time.perf_counter() - c0)
@@ -326,34 +324,15 @@ class Flight:
                 law.observe_bag(None, state)
                 self._bag_obs[n] = None
                 if n in self.filters:
-                    self._release_filter(n)
+                    self.filters[n].release()
             return
         obs = BagObservation(np.asarray(bag.position, float), rot.normalize(bag.orientation),
                              np.asarray(bag.velocity, float), np.asarray(bag.omega, float), True,
                              self._told_mass, np.asarray(sc.bag.size, float), sc.bag.model)
         law.observe_bag(obs, state)
         self._bag_obs[n] = obs
-        if n in self.filters:
-            self._filter_bag(n, obs, state)
-
-    def _filter_bag(self, n: str, obs: Any, state: Any) -> None:
-        """safety_filter_node's handling of the held bag: mass and extent, rebuilt on a 1 cm move."""
-        from astrobee_control import mass as mp
-        from astrobee_control.safety import box_corners, carried_load
-        offset, r_rel = obs.offset_in(state)
-        key = (tuple(np.round(offset, 2)), tuple(np.round(r_rel, 2).ravel()), obs.mass)
-        if key == self._bag_keys.get(n):
-            return
-        mprops, com = carried_load(mp.robot(), obs.mass, obs.size, offset, r_rel)
-        self.filters[n].set_mass(mprops, com)
-        self._extent[n] = box_corners(offset, obs.size, r_rel)
-        self._bag_keys[n] = key
-
-    def _release_filter(self, n: str) -> None:
-        from astrobee_control import mass as mp
-        if self._bag_keys.get(n) is not None:
-            self.filters[n].set_mass(mp.robot())
-            self._extent[n], self._bag_keys[n] = [], None
+        if n in self.filters:        # the held bag's mass and extent, rebuilt on a 1 cm move
+            self.filters[n].observe_bag(obs, state)
 
     def _command(self, n: str) -> np.ndarray:
         return self._wrench[n]
