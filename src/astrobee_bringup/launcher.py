@@ -263,8 +263,8 @@ class Launcher:
         proc.stdout.close()
 
     def why(self, spec: NodeSpec, code: int) -> str:
-        """One line: how `spec` ended (exit code or signal) and the last thing it said about
-        it (its last line naming an error, else its last line)."""
+        """One line: how `spec` ended (exit code or signal) and, for an exit code, what it said
+        about it (the last of its last 8 lines naming an error, else its last line)."""
         if code < 0:
             try:
                 how = f"killed by {signal.Signals(-code).name}"
@@ -275,9 +275,10 @@ class Launcher:
         t = next((t for t in reversed(self._threads) if t.name == f"relay-{spec.name}"), None)
         if t is not None:
             t.join(timeout=1.0)          # its last lines may still be in the pipe
-        lines = list(self._tails.get(spec.name, ()))
-        said = next((ln for ln in reversed(lines) if _ERROR_WORDS.search(ln)),
-                    lines[-1] if lines else "")
+        lines = list(self._tails.get(spec.name, ()))[-8:]      # what it said last
+        # killed by a signal: what it said before is not about that
+        said = "" if code < 0 else next((ln for ln in reversed(lines) if _ERROR_WORDS.search(ln)),
+                                        lines[-1] if lines else "")
         said = _TS_PREFIX.sub("", said)
         return f"'{spec.name}' {how}" + (f": {said}" if said else "")
 

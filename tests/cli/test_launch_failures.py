@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -140,3 +141,29 @@ def test_launch_arguments_anywhere_and_port_beats_the_environment(procs, port, t
     assert "[broken]" not in "\n".join(p.lines)      # bad:=false was read after the options
     p.signal(signal.SIGINT)
     assert p.wait(timeout=60) == 0
+
+
+def test_killed_node_is_the_cause_without_stale_lines(tmp_path):
+    """kill -9 of a required node: the cause names the signal, not an old log line."""
+    import io
+    import threading
+
+    from astrobee_bringup.launcher import Launcher, NodeSpec
+    code = ("import time\nprint('[WARN] position error 0.2 m', flush=True)\nprint('up', flush=True)\n"
+            "while True: time.sleep(0.05)")
+    specs = [NodeSpec("victim", argv=[sys.executable, "-c", code]),
+             NodeSpec("bystander", required=False,
+                      argv=[sys.executable, "-c", "import time\nwhile True: time.sleep(0.05)"])]
+    out = io.StringIO()
+    launcher = Launcher(specs, out=out, colour=False, stop_grace=0.0, sigint_timeout=5.0)
+
+    def kill_when_up():
+        deadline = time.monotonic() + 30
+        while not re.search(r"\[victim\]\s+up", out.getvalue()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(launcher.procs[0][1].pid, signal.SIGKILL)
+    threading.Thread(target=kill_when_up, daemon=True).start()
+    assert launcher.run() == 1
+    assert launcher.cause == "'victim' killed by SIGKILL", out.getvalue()
+    assert out.getvalue().rstrip().endswith("error: 'victim' killed by SIGKILL")
+    assert all(p.poll() is not None for _, p in launcher.procs)
