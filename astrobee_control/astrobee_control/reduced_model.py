@@ -59,6 +59,66 @@ class HandleParams:
                 "rest_offset": r(self.rest_offset), "drag": round(self.drag, 5)}
 
 
+@dataclass(frozen=True)
+class PendulumParams:
+    """The bag as a rigid box swinging about its grasp point (a spherical joint on the robot)
+    held by a rotational spring-damper (robot body-frame axes). The bag centre rests at
+    `rest_offset`, `lever` (hinge -> bag centre) from the hinge."""
+
+    rot_stiffness: np.ndarray  # (3,) N m/rad
+    rot_damping: np.ndarray    # (3,) N m s/rad
+    rest_offset: np.ndarray    # (3,) m, robot -> bag centre at rest, robot body frame
+    lever: np.ndarray          # (3,) m, hinge -> bag centre at rest, robot body frame
+    inertia: np.ndarray        # (3,) kg m^2, the bag's inertia about its centre (body axes)
+    kind = "pendulum"
+
+    def __post_init__(self) -> None:
+        for name in ("rot_stiffness", "rot_damping", "rest_offset", "lever", "inertia"):
+            v = np.broadcast_to(np.asarray(getattr(self, name), float), (3,)).copy()
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"pendulum {name} must be finite")
+            object.__setattr__(self, name, v)
+        if np.any(self.rot_stiffness < 0) or np.any(self.rot_damping < 0) or \
+                np.any(self.inertia <= 0) or not np.linalg.norm(self.lever) > 0:
+            raise ValueError("pendulum stiffness, damping >= 0, inertia > 0, lever non-zero")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PendulumParams":
+        return cls(d["rot_stiffness"], d["rot_damping"], d["rest_offset"], d["lever"],
+                   d["inertia"])
+
+    def to_dict(self) -> dict:
+        r = lambda v: [round(float(x), 5) for x in v]  # noqa: E731
+        return {"kind": self.kind, "rot_stiffness": r(self.rot_stiffness),
+                "rot_damping": r(self.rot_damping), "rest_offset": r(self.rest_offset),
+                "lever": r(self.lever), "inertia": r(self.inertia)}
+
+    def step_matrices(self, dt: float, coupling: float) -> tuple[np.ndarray, np.ndarray]:
+        """(J, A): the effective inertia about the bag centre J = I + coupling * (|l|^2 1 - l l^T)
+        (coupling: the bag mass for a robot that follows its reference exactly, the reduced
+        mass robot-bag when the robot is free) and A = (J + dt C + dt^2 K)^-1."""
+        lv = self.lever
+        J = np.diag(self.inertia) + coupling * (lv @ lv * np.eye(3) - np.outer(lv, lv))
+        A = np.linalg.inv(J + dt * np.diag(self.rot_damping) + dt * dt * np.diag(self.rot_stiffness))
+        return J, A
+
+
+def rotate_by(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (..., 3) by rotation vectors theta (..., 3) (Rodrigues, batched)."""
+    ang = np.linalg.norm(theta, axis=-1, keepdims=True)
+    k = theta / np.maximum(ang, 1e-12)
+    c, s = np.cos(ang), np.sin(ang)
+    return v * c + np.cross(k, v) * s + k * (np.sum(k * v, -1, keepdims=True) * (1.0 - c))
+
+
+def swing_from_offset(lever: np.ndarray, rest_offset: np.ndarray, offset: np.ndarray,
+                      rel_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pendulum's small-angle swing (rotation vector, rate; body frame) that puts the bag
+    centre at `offset` moving at `rel_velocity` (body frame, relative to the robot)."""
+    L2 = float(lever @ lever)
+    return np.cross(lever, offset - rest_offset) / L2, np.cross(lever, rel_velocity) / L2
+
+
 @dataclass
 class RolloutStart:
     """The state a rollout starts from (world frame) and the masses involved."""
@@ -114,6 +174,9 @@ class Rollouts:
     bag_position: np.ndarray | None
     bag_velocity: np.ndarray | None
     force: np.ndarray           # (N, M, 3) world-frame force the PD law applied at step k
+    bag_turn: np.ndarray | None = None  # (N, M, 3) bag rotation since the start (rotation
+                                        # vector, robot body frame); None: the bag keeps its
+                                        # attitude in the body frame
 
 
 class RolloutModel(Protocol):
@@ -130,7 +193,8 @@ class ReducedModel:
 
     name = "reduced"
 
-    def __init__(self, handle: HandleParams, handles: dict[str, HandleParams] | None = None) -> None:
+    def __init__(self, handle: "HandleParams | PendulumParams",
+                 handles: "dict[str, HandleParams | PendulumParams] | None" = None) -> None:
         self.handle = handle
         self.handles = dict(handles or {})
 
@@ -140,7 +204,10 @@ class ReducedModel:
             self.handle = self.handles[bag_model]
 
     def rollout(self, start: RolloutStart, refs: CandidateReferences, gains: Gains) -> Rollouts:
-        """Roll every candidate reference out with the PD law on robot + spring-damper bag."""
+        """Roll every candidate reference out with the PD law on robot + bag (the handle's
+        kind: a pendulum or a point mass on a spring-damper)."""
+        if isinstance(self.handle, PendulumParams) and start.carrying:
+            return self._rollout_pendulum(start, refs, gains)
         n, m = refs.position.shape[:2]
         dt = float(refs.dt)
         kp, kd = np.asarray(gains.kp, float), np.asarray(gains.kd, float)
@@ -200,6 +267,89 @@ class ReducedModel:
         return Rollouts(out_xr, out_vr, out_xb, out_vb, out_f)
 
 
+    def _rollout_pendulum(self, start: RolloutStart, refs: CandidateReferences,
+                          gains: Gains) -> Rollouts:
+        """The pendulum bag (PendulumParams) on a free robot: the centre of mass moves with the
+        PD force alone; the swing obeys (I + mu P) w' = -K th - C w - (m_b/M) l x F (body
+        frame, P = |l|^2 1 - l l^T), integrated implicitly in (K, C); bag centre placed by
+        rotating the lever exactly (Rodrigues)."""
+        h = self.handle
+        n, m = refs.position.shape[:2]
+        dt = float(refs.dt)
+        kp, kd = np.asarray(gains.kp, float), np.asarray(gains.kd, float)
+        fmax = np.asarray(gains.max_force, float)
+        m_r, ff, m_b = float(start.robot_mass), float(start.ff_mass), float(start.bag_mass)
+        mt = m_r + m_b
+        g, gr = m_b / mt, m_r / mt
+        d = h.rest_offset if start.rest_offset is None else np.asarray(start.rest_offset, float)
+        lv = h.lever
+        hinge = d - lv
+        J, A = h.step_matrices(dt, m_r * m_b / mt)
+        JA = J @ A.T
+        KA = (dt * h.rot_stiffness)[:, None] * A.T
+        xr = np.broadcast_to(np.asarray(start.robot_position, float), (n, 3)).copy()
+        vr = np.broadcast_to(np.asarray(start.robot_velocity, float), (n, 3)).copy()
+        xb = np.broadcast_to(np.asarray(start.bag_position, float), (n, 3))
+        vb = np.broadcast_to(np.asarray(start.bag_velocity, float), (n, 3))
+        R0 = refs.rotation[0]
+        th0, om = swing_from_offset(lv, d, (xb - xr) @ R0, (vb - vr) @ R0)
+        th = th0.copy()
+        X = g * xb + gr * xr
+        V = g * vb + gr * vr
+        out = {k: np.empty((n, m, 3)) for k in ("xr", "vr", "xb", "vb", "f", "turn")}
+        for i in range(m):
+            R = refs.rotation[i]
+            a_w = refs.accel[:, i] + kp * (refs.position[:, i] - xr) + kd * (refs.velocity[:, i] - vr)
+            f_b = np.clip(ff * (a_w @ R), -fmax, fmax)
+            F = f_b @ R.T
+            om = om @ JA - th @ KA - (dt * g) * (np.cross(lv, f_b) @ A.T)
+            th = th + dt * om
+            rl = rotate_by(th, lv)
+            u = (hinge + rl) @ R.T
+            ud = np.cross(om, rl) @ R.T
+            V = V + (dt / mt) * F
+            X = X + dt * V
+            xr, vr = X - g * u, V - g * ud
+            out["xr"][:, i], out["vr"][:, i], out["f"][:, i] = xr, vr, F
+            out["xb"][:, i], out["vb"][:, i] = X + gr * u, V + gr * ud
+            out["turn"][:, i] = th - th0
+        return Rollouts(out["xr"], out["vr"], out["xb"], out["vb"], out["f"], out["turn"])
+
+
+def simulate_pendulum(handle: PendulumParams, bag_mass: float, t: np.ndarray,
+                      robot_position: np.ndarray, robot_velocity: np.ndarray,
+                      robot_rotation: np.ndarray, bag_position0: np.ndarray,
+                      bag_velocity0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pendulum bag's motion (positions, velocities (T, 3)) when the robot follows a
+    recorded motion exactly (as simulate_bag): the swing driven by the robot's acceleration,
+    (I + m_b P) w' = -K th - C w - m_b l x a (body frame)."""
+    m_b = float(bag_mass)
+    d, lv, K = handle.rest_offset, handle.lever, handle.rot_stiffness
+    hinge = d - lv
+    acc = np.zeros_like(robot_velocity)
+    acc[1:] = np.diff(robot_velocity, axis=0) / np.diff(t)[:, None]
+    R0 = robot_rotation[0]
+    th, om = swing_from_offset(lv, d, (bag_position0 - robot_position[0]) @ R0,
+                               (bag_velocity0 - robot_velocity[0]) @ R0)
+    T = len(t)
+    out_x = np.empty((T, 3))
+    out_v = np.empty((T, 3))
+    out_x[0], out_v[0] = bag_position0, bag_velocity0
+    cache: dict[float, tuple] = {}
+    for i in range(1, T):
+        dt = round(float(t[i] - t[i - 1]), 9)
+        if dt not in cache:
+            cache[dt] = handle.step_matrices(dt, m_b)
+        J, A = cache[dt]
+        R = robot_rotation[i]
+        om = A @ (J @ om - dt * K * th - dt * m_b * np.cross(lv, acc[i] @ R))
+        th = th + dt * om
+        rl = rotate_by(th, lv)
+        out_x[i] = robot_position[i] + R @ (hinge + rl)
+        out_v[i] = robot_velocity[i] + R @ np.cross(om, rl)
+    return out_x, out_v
+
+
 def simulate_bag(handle: HandleParams, bag_mass: float, t: np.ndarray, robot_position: np.ndarray,
                  robot_velocity: np.ndarray, robot_rotation: np.ndarray, bag_position0: np.ndarray,
                  bag_velocity0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -229,12 +379,17 @@ def simulate_bag(handle: HandleParams, bag_mass: float, t: np.ndarray, robot_pos
     return out_x, out_v
 
 
-def identified_handles() -> dict[str, HandleParams]:
+def handle_from_dict(d: dict) -> "HandleParams | PendulumParams":
+    """A handle of config/reduced_models.yaml: `kind: pendulum` or (default) a spring-damper."""
+    return PendulumParams.from_dict(d) if d.get("kind") == "pendulum" else HandleParams.from_dict(d)
+
+
+def identified_handles() -> "dict[str, HandleParams | PendulumParams]":
     """Handle parameters per bag model from config/reduced_models.yaml (bench/sysid_bag.py)."""
     from astrobee import config
     try:
         data = config.load_yaml("reduced_models.yaml")
     except config.ConfigError:
         return {}
-    return {name: HandleParams.from_dict(d) for name, d in (data.get("handles") or {}).items()}
+    return {name: handle_from_dict(d) for name, d in (data.get("handles") or {}).items()}
 

@@ -23,7 +23,7 @@ from astrobee import rotations as rot
 
 from .mass import MassProperties, with_bag
 from .pd import State
-from .reduced_model import HandleParams, simulate_bag
+from .reduced_model import HandleParams, PendulumParams, simulate_bag, simulate_pendulum
 from .reference import rest_to_rest
 from .tracking import Tracker
 
@@ -41,6 +41,8 @@ class Recording:
     bag_position: np.ndarray
     bag_velocity: np.ndarray
     bag_mass: float
+    bag_orientation: np.ndarray | None = None   # (T, 4) [x,y,z,w], bag -> world
+    bag_omega: np.ndarray | None = None         # (T, 3) rad/s, world frame
 
     @property
     def rotation(self) -> np.ndarray:
@@ -79,24 +81,25 @@ def record(sim, robot_mass: MassProperties, moves: list[tuple[np.ndarray, float]
         while sim.time < end:
             p, q, v, w = sim.robot_state(robot)
             b = sim.bag_state()
-            rows.append((sim.time, p, v, q, b.position, b.velocity))
+            rows.append((sim.time, p, v, q, b.position, b.velocity, b.orientation, b.omega))
             state = State(np.asarray(p), np.asarray(v), np.asarray(q), rot.rotate_inverse(q, w))
             out = tracker.update(state, sim.time, dt).output
             sim.command(np.concatenate([out.force, out.torque]), robot)
             sim.advance(dt)
         prev = goal
-    t, rp, rv, rq, bp, bv = (np.array(c, float) for c in zip(*rows))
-    return Recording(t, rp, rv, rq, bp, bv, float(bag.mass))
+    t, rp, rv, rq, bp, bv, bq, bw = (np.array(c, float) for c in zip(*rows))
+    return Recording(t, rp, rv, rq, bp, bv, float(bag.mass), bq, bw)
 
 
-def predict(handle: HandleParams, rec: Recording) -> np.ndarray:
+def predict(handle: "HandleParams | PendulumParams", rec: Recording) -> np.ndarray:
     """Bag-centre positions (T, 3) the handle model predicts for a recording's robot motion."""
-    x, _ = simulate_bag(handle, rec.bag_mass, rec.t, rec.robot_position, rec.robot_velocity,
-                        rec.rotation, rec.bag_position[0], rec.bag_velocity[0])
+    sim = simulate_pendulum if isinstance(handle, PendulumParams) else simulate_bag
+    x, _ = sim(handle, rec.bag_mass, rec.t, rec.robot_position, rec.robot_velocity,
+               rec.rotation, rec.bag_position[0], rec.bag_velocity[0])
     return x
 
 
-def error(handle: HandleParams, rec: Recording) -> dict:
+def error(handle: "HandleParams | PendulumParams", rec: Recording) -> dict:
     """Bag-centre position error of the model on a recording: RMS and max (m), and the RMS of
     the bag's own excursion about its mean body-frame offset (what a rigid-offset model misses)."""
     e = np.linalg.norm(predict(handle, rec) - rec.bag_position, axis=1)
@@ -134,4 +137,37 @@ def _fit_from(recordings: list[Recording], k0: float, c0: float,
     hi = np.concatenate([np.full(3, np.log(1e5)), np.full(3, np.log(1e4)), d0 + 0.3, [np.log(1e3)]])
     sol = least_squares(residuals, np.clip(x0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi),
                         x_scale="jac", max_nfev=80)
+    return unpack(sol.x), float(sol.cost)
+
+
+def fit_pendulum(recordings: list[Recording], lever_length: float = 0.25,
+                 starts=((1.0, 0.3), (10.0, 1.0), (0.1, 0.1))) -> PendulumParams:
+    """Least-squares pendulum parameters (reduced_model.PendulumParams) over recordings: log
+    rotational stiffness and damping per body axis, rest offset, lever (hinge -> centre) and
+    log inertia per body axis; one solve per (stiffness, damping) start, the best kept."""
+    fits = [_fit_pendulum_from(recordings, lever_length, *s) for s in starts]
+    return min(fits, key=lambda f: f[1])[0]
+
+
+def _fit_pendulum_from(recordings: list[Recording], lever_length: float, k0: float,
+                       c0: float) -> tuple[PendulumParams, float]:
+    from scipy.optimize import least_squares
+
+    d0 = np.mean([r.body_offsets().mean(axis=0) for r in recordings], axis=0)
+    l0 = lever_length * d0 / np.linalg.norm(d0)
+    x0 = np.concatenate([np.full(3, np.log(k0)), np.full(3, np.log(c0)), d0, l0,
+                         np.full(3, np.log(0.25))])
+
+    def unpack(x: np.ndarray) -> PendulumParams:
+        return PendulumParams(np.exp(x[:3]), np.exp(x[3:6]), x[6:9], x[9:12], np.exp(x[12:15]))
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        h = unpack(x)
+        return np.concatenate([(predict(h, r) - r.bag_position).ravel() for r in recordings])
+
+    lo = np.concatenate([np.full(6, np.log(1e-3)), d0 - 0.1, l0 - 0.25, np.full(3, np.log(0.02))])
+    hi = np.concatenate([np.full(3, np.log(1e4)), np.full(3, np.log(1e3)), d0 + 0.1, l0 + 0.25,
+                         np.full(3, np.log(5.0))])
+    sol = least_squares(residuals, np.clip(x0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi),
+                        x_scale="jac", max_nfev=60)
     return unpack(sol.x), float(sol.cost)
