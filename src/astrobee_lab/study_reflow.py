@@ -31,6 +31,7 @@ from .study_spec import StudyError, build_scenario, load_study
 # metric -> (absolute tolerance, relative tolerance): |graph - row| <= abs + rel * |row|
 TOLERANCES = {
     "final_position_error": (0.02, 0.5),
+    "final_attitude_error": (0.05, 0.5),
     "rms_position_error": (0.005, 0.5),
     "min_robot_clearance": (0.02, 0.0),
     "min_bag_clearance": (0.03, 0.0),
@@ -57,6 +58,8 @@ class ReflowResult:
         lines = [f"reflow of {self.key} through the graph: {self.run_dir} (launch exit {self.launch_rc})"]
         for name, (a, b, ok) in self.checks.items():
             lines.append(f"  {'ok  ' if ok else 'DIFF'} {name:22s} study {_show(a):>12s}  graph {_show(b):>12s}")
+        lines.append(f"  study: {self.row.get('cause')}")
+        lines.append(f"  graph: {self.leg.get('reason')}")
         lines.append("agrees" if self.agrees else "DIFFERS")
         return "\n".join(lines)
 
