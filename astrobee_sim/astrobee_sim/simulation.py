@@ -61,7 +61,7 @@ class Simulation:
                  bag_model: str | None = None, bag_variant: str | None = None,
                  bag_resolution: int | None = None, robots: list[str] | None = None,
                  flight_mode: str | None = None, wall_thickness: float | None = None,
-                 wall_bodies: int = 64, fem_solver: str | None = None,
+                 wall_bodies: int = 16, fem_solver: str | None = None,
                  bag_mass: float | None = None, realism: str | dict | Realism | None = None):
         """scenario: a name in config/scenarios (loaded with the bag_*/robots/flight_mode/
         fem_solver overrides, which also apply to later resets by name) or a Scenario as is.

@@ -250,17 +250,24 @@ def module_colour(name: str) -> tuple[float, float, float]:
     return MODULE_COLOURS.get(name.split("/")[0], (0.8, 0.8, 0.8))
 
 
+# pybullet 3.2.7's createCollisionShapeArray keeps the first 16 children of a compound and
+# silently drops the rest (MAX_COMPOUND_COLLISION_SHAPES in its C API): with 64 boxes a body,
+# 233 of the station's 426 slabs were missing and a robot flew out through Node 2's ceiling.
+MAX_COMPOUND_CHILDREN = 16
+
+
 def build_pybullet(world: World, client: int, visuals: bool = False,
                    per_body: int = 64) -> list[int]:
     """Add the wall slabs to a pybullet client as static bodies; returns their ids.
 
-    per_body > 1: compound bodies of up to `per_body` boxes (cheap: 322 separate static bodies
-    cost ~22 us a physics step here, 6 compounds ~3 us; multibodies with fixed links far more),
-    for rigid-only worlds: pybullet's soft bodies do not collide properly with compounds
-    (measured: FEM nodes sank through). per_body <= 1 (FEM worlds) or visuals: one plain box
-    body per slab.
+    per_body > 1: compound bodies of up to `per_body` boxes, at most MAX_COMPOUND_CHILDREN
+    (cheap: 426 separate static bodies cost ~22 us a physics step here, 27 compounds ~4 us;
+    multibodies with fixed links far more), for rigid-only worlds: pybullet's soft bodies do
+    not collide properly with compounds (measured: FEM nodes sank through). per_body <= 1 (FEM
+    worlds) or visuals: one plain box body per slab.
     """
     import pybullet as p
+    per_body = min(per_body, MAX_COMPOUND_CHILDREN)
     ids = []
     owner = _slab_module(world)
     w = world.walls

@@ -1,5 +1,6 @@
 """The procedural ISS: walls enclose exactly the grown keep-in boxes, hatches open, distance query."""
 import numpy as np
+import pytest
 
 from astrobee import config
 from astrobee_sim.world import World, subtract_box
@@ -84,18 +85,55 @@ def test_cell_cached_queries_are_exact_for_robots_bags_and_node_clouds():
             assert d == brute.min() and brute[i] == d
 
 
-def test_build_pybullet_plain_and_compound_with_visuals():
+def _slab_rays(w: World) -> tuple[list, list]:
+    """A ray through the middle of every slab across its thin axis."""
+    lo, hi = w.walls[:, :3], w.walls[:, 3:]
+    mid = (lo + hi) / 2
+    thin = np.argmin(hi - lo, axis=1)
+    starts, ends = mid.copy(), mid.copy()
+    k = np.arange(len(mid))
+    starts[k, thin] = lo[k, thin] - 0.01
+    ends[k, thin] = hi[k, thin] + 0.01
+    return starts.tolist(), ends.tolist()
+
+
+@pytest.mark.parametrize("per_body,visuals", [(1, True), (1, False), (16, False), (64, False)])
+def test_build_pybullet_keeps_every_slab(per_body, visuals):
+    """Every slab is in the pybullet world, whatever the grouping: pybullet keeps only the first
+    16 children of a compound shape, and 64 a body once lost 233 of 426 slabs (a robot flew
+    out through Node 2's ceiling)."""
     import pybullet as p
-    from astrobee_sim.world import build_pybullet
+    from astrobee_sim.world import MAX_COMPOUND_CHILDREN, build_pybullet
     w = World.from_config(thickness=0.25)
     c = p.connect(p.DIRECT)
     try:
-        plain = build_pybullet(w, c, visuals=True, per_body=1)
-        compound = build_pybullet(w, c, visuals=False, per_body=64)
-        assert len(plain) == len(w.walls) and len(compound) == -(-len(w.walls) // 64)
-        # a ray across Node 2 hits a wall just outside the grown keep-in box
+        ids = build_pybullet(w, c, visuals=visuals, per_body=per_body)
+        group = 1 if per_body <= 1 or visuals else min(per_body, MAX_COMPOUND_CHILDREN)
+        assert len(ids) == -(-len(w.walls) // group)
+        starts, ends = _slab_rays(w)
+        hits = [h[0] for h in p.rayTestBatch(starts, ends, physicsClientId=c)]
+        missing = [k for k, h in enumerate(hits) if h not in ids]
+        assert not missing, f"{len(missing)} of {len(w.walls)} slabs missing: {missing[:10]}"
+        # a ray up across Node 2 stops at the wall just outside the grown keep-in box
         hit = p.rayTest([10.95, 0.0, 4.84], [10.95, 0.0, 10.0], physicsClientId=c)[0]
-        assert hit[0] in plain + compound
+        assert hit[0] in ids
         assert abs(hit[3][2] - w.free[16, 5]) < 1e-6
     finally:
         p.disconnect(c)
+
+
+def test_robot_pushed_up_in_node2_meets_the_ceiling():
+    """The default (compound-walled) simulation: full thrust up from Node 2 ends on its ceiling."""
+    import pybullet as p
+    from astrobee_sim.simulation import Simulation
+    with Simulation("node2_to_jem") as sim:
+        p.resetBasePositionAndOrientation(sim.robots[""].id, [10.95, 0.6, 4.84], [0, 0, 0, 1],
+                                          physicsClientId=sim.client)
+        touched = False
+        for _ in range(40):
+            sim.command(np.array([0.0, 0.0, 2.0, 0.0, 0.0, 0.0]))
+            sim.advance(0.5)
+            touched = touched or bool(sim.contacts())
+        z = sim.robot_state()[0][2]
+    assert touched
+    assert z < 6.5, z
