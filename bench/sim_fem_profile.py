@@ -61,7 +61,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--resolution", type=int, default=400)
     a = ap.parse_args()
-    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=a.resolution)
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=a.resolution,
+                     fem_solver="bullet")       # pybullet's profiler: Bullet's soft body
     try:
         start, q0 = sim.robot_state()[:2]
         springs = len({tuple(sorted(e)) for t in sim.bag.mesh.tets.tolist()
