@@ -482,8 +482,9 @@ class MissionClient:
         for attempt in range(2):
             self.spin_until(lambda: not self._graph_not_ready(robots), ready_timeout,
                             lambda: f"the graph ready for {name} ({self._graph_not_ready(robots)})")
-            for r in robots:
-                self.watch(r).pose = None
+            known = set(self.watches)
+            for w in self.watches.values():     # what comes now answers this reset
+                w.pose, w.cmd_ns = None, -1
             count = self.scenario_count
             req = self.roszen.request_class("astrobee_msgs/srv/Reset")()
             req.scenario, req.seed = name, seed
@@ -493,15 +494,17 @@ class MissionClient:
             self.spin_until(lambda: self.scenario_count > count, ready_timeout,
                             f"the simulator's description of {name} after its reset")
             built = list(self.scenario_info.robots)
-            if not self._graph_not_ready(built) or attempt:
+            ws = [self.watches[r] for r in built if r in known]
+
+            def late() -> str:
+                return ", ".join(w.named for w in ws
+                                 if w.pose is None or w.cmd_ns != mc.to_ns(w.sim_time))
+            # every controller has answered the state of t=0 before its segment comes
+            self.spin_until(lambda: not late(), ready_timeout,
+                            lambda: f"the state of t=0 answered by every controller ({late()} did not)")
+            if len(ws) == len(built) and not self._graph_not_ready(built) or attempt:
                 break
             robots = built
-        ws = [self.watch(r) for r in self.scenario_info.robots]
-
-        def late() -> str:
-            return ", ".join(w.named for w in ws if w.pose is None or w.cmd_ns != mc.to_ns(w.sim_time))
-        self.spin_until(lambda: not late(), ready_timeout,
-                        lambda: f"the state of t=0 answered by every controller ({late()} did not)")
 
     def _run_chunks(self, ws: list[RobotWatch], marks: dict[str, int], duration: float,
                     wall_timeout: float, tick) -> None:
