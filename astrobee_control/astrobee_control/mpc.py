@@ -35,7 +35,7 @@ from .clearance import KeepIn
 from .law import BagObservation
 from .mass import MassProperties
 from .pd import State
-from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStart
+from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStart, rotate_by
 from .reference import SampledTrajectory
 from .tracking import CONTROLLING, Step, Tracker
 
@@ -253,7 +253,9 @@ class MpcLaw:
             return RolloutStart(state.position, state.velocity, mass, ff)
         return RolloutStart(state.position, state.velocity, mass, ff, np.asarray(b.position, float),
                             np.asarray(b.velocity, float), float(b.mass),
-                            np.asarray(b.size, float), self.rest_offset, self.bag_rotation)
+                            np.asarray(b.size, float), self.rest_offset, self.bag_rotation,
+                            np.asarray(state.orientation, float), np.asarray(state.omega, float),
+                            self.tracker.robot_mass.inertia, self.tracker.pd.mass.inertia)
 
     def _score(self, out, nom: SampledTrajectory, times: np.ndarray, rotation: np.ndarray,
                start: RolloutStart) -> tuple[np.ndarray, np.ndarray]:
@@ -270,8 +272,15 @@ class MpcLaw:
             - c.robot_half_size
         relvel = np.zeros_like(track)
         if out.bag_position is not None:
-            bag_c = np.einsum("kij,jl,pl->kpi", R, start.bag_rotation, _CUBE * (start.bag_size / 2))
-            corners = out.bag_position[:, sl, None, :] + bag_c[None]      # (N, K, 8, 3)
+            body_c = (_CUBE * (start.bag_size / 2)) @ start.bag_rotation.T      # (8, 3) body
+            turn = getattr(out, "bag_turn", None)
+            if turn is None:
+                bag_c = np.einsum("kij,pj->kpi", R, body_c)[None]            # (1, K, 8, 3)
+            else:   # the bag turned (rotation vector, start body frame) since the start
+                bag_c = np.einsum("ij,nkpj->nkpi", rotation[0] if start.robot_orientation is None
+                                  else rot.to_matrix(start.robot_orientation),
+                                  rotate_by(turn[:, sl, None, :], body_c[None, None]))
+            corners = out.bag_position[:, sl, None, :] + bag_c            # (N, K, 8, 3)
             clr = np.minimum(clr, self.keep_in.clearance(corners, reach).min(axis=(1, 2)))
             relvel = np.mean(np.sum((out.bag_velocity - out.robot_velocity) ** 2, -1), axis=1)
         intrusion = np.maximum(c.clearance_margin - clr, 0.0)

@@ -103,6 +103,31 @@ class PendulumParams:
         return J, A
 
 
+ATTITUDE_STEP = 0.2   # s, the turning rollout's attitude step (its dynamics are slow: torque-limited)
+
+
+@dataclass(frozen=True)
+class RigidBodyParams:
+    """The bag held rigidly at `rest_offset` (robot body frame), robot + bag turning as one
+    torque-limited rigid body (ReducedModel's attitude rollout)."""
+
+    rest_offset: np.ndarray  # (3,) m
+    kind = "rigid_body"
+
+    def __post_init__(self) -> None:
+        v = np.broadcast_to(np.asarray(self.rest_offset, float), (3,)).copy()
+        if not np.all(np.isfinite(v)):
+            raise ValueError("rigid_body rest_offset must be finite")
+        object.__setattr__(self, "rest_offset", v)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RigidBodyParams":
+        return cls(d["rest_offset"])
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "rest_offset": [round(float(x), 5) for x in self.rest_offset]}
+
+
 def rotate_by(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors v (..., 3) by rotation vectors theta (..., 3) (Rodrigues, batched)."""
     ang = np.linalg.norm(theta, axis=-1, keepdims=True)
@@ -133,6 +158,10 @@ class RolloutStart:
     bag_size: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_offset: np.ndarray | None = None   # body frame; None: the handle params' own
     bag_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))  # bag -> robot body
+    robot_orientation: np.ndarray | None = None  # [x,y,z,w] body -> world; None: the reference's
+    robot_omega: np.ndarray | None = None        # rad/s, body frame; None: zero
+    robot_inertia: np.ndarray | None = None      # 3x3 kg m^2, the robot alone; None: Astrobee's
+    ff_inertia: np.ndarray | None = None         # 3x3, what the PD law's attitude part assumes
 
     @property
     def carrying(self) -> bool:
@@ -158,11 +187,15 @@ class Gains:
     kp: np.ndarray         # (3,) or scalar, 1/s^2
     kd: np.ndarray         # (3,) or scalar, 1/s
     max_force: np.ndarray  # (3,) N, body axes
+    att_kp: np.ndarray = field(default_factory=lambda: np.full(3, 4.0))    # 1/s^2
+    omega_kd: np.ndarray = field(default_factory=lambda: np.full(3, 3.2))  # 1/s
+    max_torque: np.ndarray = field(default_factory=lambda: np.full(3, 0.0452))  # N m, body axes
 
     @classmethod
     def from_flight_mode(cls, fm) -> "Gains":
         return cls(np.asarray(fm.pos_kp, float), np.asarray(fm.vel_kd, float),
-                   np.asarray(fm.max_force, float))
+                   np.asarray(fm.max_force, float), np.asarray(fm.att_kp, float),
+                   np.asarray(fm.omega_kd, float), np.asarray(fm.max_torque, float))
 
 
 @dataclass
@@ -174,9 +207,9 @@ class Rollouts:
     bag_position: np.ndarray | None
     bag_velocity: np.ndarray | None
     force: np.ndarray           # (N, M, 3) world-frame force the PD law applied at step k
-    bag_turn: np.ndarray | None = None  # (N, M, 3) bag rotation since the start (rotation
-                                        # vector, robot body frame); None: the bag keeps its
-                                        # attitude in the body frame
+    bag_turn: np.ndarray | None = None  # (N, M, 3) the robot's (and rigidly held bag's)
+                                        # rotation since the start: rotation vector in the
+                                        # start's body frame; None: attitude follows the reference
 
 
 class RolloutModel(Protocol):
@@ -208,6 +241,8 @@ class ReducedModel:
         kind: a pendulum or a point mass on a spring-damper)."""
         if isinstance(self.handle, PendulumParams) and start.carrying:
             return self._rollout_pendulum(start, refs, gains)
+        if isinstance(self.handle, RigidBodyParams) and start.carrying:
+            return self._rollout_turning(start, refs, gains)
         n, m = refs.position.shape[:2]
         dt = float(refs.dt)
         kp, kd = np.asarray(gains.kp, float), np.asarray(gains.kd, float)
@@ -296,7 +331,7 @@ class ReducedModel:
         th = th0.copy()
         X = g * xb + gr * xr
         V = g * vb + gr * vr
-        out = {k: np.empty((n, m, 3)) for k in ("xr", "vr", "xb", "vb", "f", "turn")}
+        out = {k: np.empty((n, m, 3)) for k in ("xr", "vr", "xb", "vb", "f")}
         for i in range(m):
             R = refs.rotation[i]
             a_w = refs.accel[:, i] + kp * (refs.position[:, i] - xr) + kd * (refs.velocity[:, i] - vr)
@@ -312,8 +347,109 @@ class ReducedModel:
             xr, vr = X - g * u, V - g * ud
             out["xr"][:, i], out["vr"][:, i], out["f"][:, i] = xr, vr, F
             out["xb"][:, i], out["vb"][:, i] = X + gr * u, V + gr * ud
-            out["turn"][:, i] = th - th0
-        return Rollouts(out["xr"], out["vr"], out["xb"], out["vb"], out["f"], out["turn"])
+        return Rollouts(out["xr"], out["vr"], out["xb"], out["vb"], out["f"])
+
+
+    def _rollout_turning(self, start: RolloutStart, refs: CandidateReferences,
+                         gains: Gains) -> Rollouts:
+        """Robot + bag as one rigid body with attitude dynamics: the PD force acts at the
+        robot's centre, off the compound's centre of mass, so it turns the pair; the PD law's
+        attitude part (clipped to the small torque limits) turns it back. The body-frame force
+        limits then rotate with the robot. Per candidate: rotation (N, 3, 3), rate (N, 3)."""
+        from .mass import box_inertia, robot as robot_mass
+        n, m = refs.position.shape[:2]
+        dt = float(refs.dt)
+        kp, kd = np.asarray(gains.kp, float), np.asarray(gains.kd, float)
+        fmax = np.asarray(gains.max_force, float)
+        akp, akd = np.asarray(gains.att_kp, float), np.asarray(gains.omega_kd, float)
+        tmax = np.asarray(gains.max_torque, float)
+        m_r, ff, m_b = float(start.robot_mass), float(start.ff_mass), float(start.bag_mass)
+        mt = m_r + m_b
+        d = self.handle.rest_offset if start.rest_offset is None else \
+            np.asarray(start.rest_offset, float)
+        c = (m_b / mt) * d                                   # compound centre, body frame
+        Rb = np.asarray(start.bag_rotation, float)
+        I_r = robot_mass().inertia if start.robot_inertia is None else start.robot_inertia
+        I_c = (np.asarray(I_r, float) + Rb @ box_inertia(m_b, start.bag_size) @ Rb.T
+               + (m_r * m_b / mt) * (d @ d * np.eye(3) - np.outer(d, d)))
+        I_inv = np.linalg.inv(I_c)
+        I_ff = I_c if start.ff_inertia is None else np.asarray(start.ff_inertia, float)
+        R = np.broadcast_to(refs.rotation[0] if start.robot_orientation is None else
+                            _quat_matrix(start.robot_orientation), (n, 3, 3)).copy()
+        w = np.broadcast_to(np.zeros(3) if start.robot_omega is None else
+                            np.asarray(start.robot_omega, float), (n, 3)).copy()
+        dc = d - c
+        R0T = R[0].T.copy()
+        sub = max(1, int(round(ATTITUDE_STEP / dt)))       # rollout steps per attitude step
+        dta = sub * dt
+        x0 = np.asarray(start.robot_position, float)
+        v0 = np.asarray(start.robot_velocity, float)
+        X = np.broadcast_to(x0 + R[0] @ c, (n, 3)).copy()
+        V = np.broadcast_to(v0 + R[0] @ np.cross(w[0], c), (n, 3)).copy()
+        rc, rwc = R @ c, (R @ np.cross(w, c)[:, :, None])[:, :, 0]
+        xr, vr = X - rc, V - rwc
+        out_X, out_V, out_f = (np.empty((n, m, 3)) for _ in range(3))
+        n_att = -(-m // sub)
+        Rs = np.empty((n, n_att + 1, 3, 3))    # attitude during each attitude step (and after)
+        Ws = np.empty((n, n_att + 1, 3))
+        Rs[:, 0], Ws[:, 0] = R, w
+        fsum = np.zeros((n, 3))
+        for i in range(m):
+            a_w = refs.accel[:, i] + kp * (refs.position[:, i] - xr) + kd * (refs.velocity[:, i] - vr)
+            f_b = np.clip(ff * (a_w[:, None, :] @ R)[:, 0], -fmax, fmax)
+            F = (R @ f_b[:, :, None])[:, :, 0]
+            fsum += f_b
+            V = V + (dt / mt) * F
+            X = X + dt * V
+            out_X[:, i], out_V[:, i], out_f[:, i] = X, V, F
+            if i % sub == sub - 1 or i == m - 1:
+                # attitude step: the PD law's torque (clipped) and the force's torque about the
+                # compound centre (the force averaged over the step), semi-implicit Euler
+                e = _log_so3(R.transpose(0, 2, 1) @ refs.rotation[i])
+                tq = np.clip((akp * e - akd * w) @ I_ff.T, -tmax, tmax)
+                w = w + dta * ((tq - np.cross(c, fsum / (i % sub + 1))) @ I_inv.T)
+                R = R @ _exp_so3(dta * w)
+                fsum[:] = 0.0
+                Rs[:, i // sub + 1], Ws[:, i // sub + 1] = R, w
+                rc, rwc = R @ c, (R @ np.cross(w, c)[:, :, None])[:, :, 0]
+            xr, vr = X - rc, V - rwc
+        # positions from the centre of mass and the (piecewise constant) attitude
+        Rk = np.repeat(Rs[:, :n_att], sub, axis=1)[:, :m]
+        Wk = np.repeat(Ws[:, :n_att], sub, axis=1)[:, :m]
+        arm_r = Rk @ (-c)
+        arm_b = Rk @ dc
+        vel_r = (Rk @ np.cross(Wk, -c)[..., None])[..., 0]
+        vel_b = (Rk @ np.cross(Wk, dc)[..., None])[..., 0]
+        turn = np.repeat(_log_so3((R0T @ Rs[:, :n_att]).reshape(-1, 3, 3)).reshape(n, n_att, 3),
+                         sub, axis=1)[:, :m]
+        return Rollouts(out_X + arm_r, out_V + vel_r, out_X + arm_b, out_V + vel_b, out_f, turn)
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    from astrobee import rotations as rot
+    return rot.to_matrix(np.asarray(q, float))
+
+
+def _exp_so3(v: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of rotation vectors v (N, 3) (Rodrigues)."""
+    ang = np.sqrt(np.sum(v * v, -1))[:, None, None]
+    K = (v @ _SKEW).reshape(-1, 3, 3)
+    safe = np.maximum(ang, 1e-12)
+    return np.eye(3) + (np.sin(ang) / safe) * K + ((1.0 - np.cos(ang)) / (safe * safe)) * (K @ K)
+
+
+# v @ _SKEW is the cross-product matrix [v]x, flattened row-major
+_SKEW = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0],
+                  [0, -1, 0, 1, 0, 0, 0, 0, 0]], float)
+
+
+def _log_so3(E: np.ndarray) -> np.ndarray:
+    """Rotation vectors (N, 3) of rotation matrices E (N, 3, 3)."""
+    f = E.reshape(-1, 9)
+    s = 0.5 * (f[:, [7, 2, 3]] - f[:, [5, 6, 1]])
+    ang = np.arccos(np.clip(0.5 * (f[:, 0] + f[:, 4] + f[:, 8] - 1.0), -1.0, 1.0))
+    sn = np.sqrt(np.sum(s * s, -1))
+    return s * np.where(sn > 1e-9, ang / np.maximum(sn, 1e-12), 1.0)[:, None]
 
 
 def simulate_pendulum(handle: PendulumParams, bag_mass: float, t: np.ndarray,
@@ -323,30 +459,53 @@ def simulate_pendulum(handle: PendulumParams, bag_mass: float, t: np.ndarray,
     """The pendulum bag's motion (positions, velocities (T, 3)) when the robot follows a
     recorded motion exactly (as simulate_bag): the swing driven by the robot's acceleration,
     (I + m_b P) w' = -K th - C w - m_b l x a (body frame)."""
+    x, v = simulate_pendulums([handle], bag_mass, t, robot_position, robot_velocity,
+                              robot_rotation, bag_position0, bag_velocity0)
+    return x[0], v[0]
+
+
+def simulate_pendulums(handles: list[PendulumParams], bag_mass: float, t: np.ndarray,
+                       robot_position: np.ndarray, robot_velocity: np.ndarray,
+                       robot_rotation: np.ndarray, bag_position0: np.ndarray,
+                       bag_velocity0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """simulate_pendulum for B parameter sets at once (positions, velocities (B, T, 3)): the
+    system identification's finite-difference Jacobian in one pass."""
     m_b = float(bag_mass)
-    d, lv, K = handle.rest_offset, handle.lever, handle.rot_stiffness
+    K = np.array([h.rot_stiffness for h in handles])
+    C = np.array([h.rot_damping for h in handles])
+    d = np.array([h.rest_offset for h in handles])
+    lv = np.array([h.lever for h in handles])
     hinge = d - lv
+    inertia = np.array([h.inertia for h in handles])
+    B = len(handles)
     acc = np.zeros_like(robot_velocity)
     acc[1:] = np.diff(robot_velocity, axis=0) / np.diff(t)[:, None]
+    acc_b = np.einsum("tji,tj->ti", robot_rotation, acc)          # body frame
+    eye = np.eye(3)
+    L2 = np.sum(lv * lv, -1)
+    J = inertia[:, :, None] * eye + m_b * (L2[:, None, None] * eye - lv[:, :, None] * lv[:, None, :])
     R0 = robot_rotation[0]
-    th, om = swing_from_offset(lv, d, (bag_position0 - robot_position[0]) @ R0,
-                               (bag_velocity0 - robot_velocity[0]) @ R0)
+    u0 = (np.asarray(bag_position0) - robot_position[0]) @ R0
+    ud0 = (np.asarray(bag_velocity0) - robot_velocity[0]) @ R0
+    th = np.cross(lv, u0 - d) / L2[:, None]
+    om = np.cross(lv, ud0) / L2[:, None]
     T = len(t)
-    out_x = np.empty((T, 3))
-    out_v = np.empty((T, 3))
-    out_x[0], out_v[0] = bag_position0, bag_velocity0
-    cache: dict[float, tuple] = {}
+    out_x = np.empty((B, T, 3))
+    out_v = np.empty((B, T, 3))
+    out_x[:, 0], out_v[:, 0] = bag_position0, bag_velocity0
+    cache: dict[float, np.ndarray] = {}
     for i in range(1, T):
         dt = round(float(t[i] - t[i - 1]), 9)
         if dt not in cache:
-            cache[dt] = handle.step_matrices(dt, m_b)
-        J, A = cache[dt]
-        R = robot_rotation[i]
-        om = A @ (J @ om - dt * K * th - dt * m_b * np.cross(lv, acc[i] @ R))
+            cache[dt] = np.linalg.inv(J + dt * C[:, :, None] * eye + dt * dt * K[:, :, None] * eye)
+        A = cache[dt]
+        rhs = np.einsum("bij,bj->bi", J, om) - dt * K * th - (dt * m_b) * np.cross(lv, acc_b[i])
+        om = np.einsum("bij,bj->bi", A, rhs)
         th = th + dt * om
         rl = rotate_by(th, lv)
-        out_x[i] = robot_position[i] + R @ (hinge + rl)
-        out_v[i] = robot_velocity[i] + R @ np.cross(om, rl)
+        R = robot_rotation[i]
+        out_x[:, i] = robot_position[i] + (hinge + rl) @ R.T
+        out_v[:, i] = robot_velocity[i] + np.cross(om, rl) @ R.T
     return out_x, out_v
 
 
@@ -381,7 +540,8 @@ def simulate_bag(handle: HandleParams, bag_mass: float, t: np.ndarray, robot_pos
 
 def handle_from_dict(d: dict) -> "HandleParams | PendulumParams":
     """A handle of config/reduced_models.yaml: `kind: pendulum` or (default) a spring-damper."""
-    return PendulumParams.from_dict(d) if d.get("kind") == "pendulum" else HandleParams.from_dict(d)
+    kinds = {"pendulum": PendulumParams, "rigid_body": RigidBodyParams}
+    return kinds.get(d.get("kind"), HandleParams).from_dict(d)
 
 
 def identified_handles() -> "dict[str, HandleParams | PendulumParams]":
