@@ -40,7 +40,7 @@ from . import planner
 from .global_planner import PlanningError, plan_position
 from .planner import INVALID_COMMAND, PLAN_FAILED, VIOLATES_KEEP_IN, GlobalPlan, PlanError
 from .quaternion_poly import QuaternionPolynomial, reorientation
-from .trajectory import BezierPiece, State, Trajectory
+from .trajectory import BezierPiece, State, Trajectory, check_sample_count
 
 MIN_OVERLAP = 0.02       # m: boxes joined by a move or a turn overlap at least this much
 BOX_COST = 0.5           # s added per box entered (fewer, longer legs)
@@ -548,10 +548,13 @@ class HeldTrajectory:
         st.quat = rot.normalize(rot.multiply(st.quat, self.relative))
         return st
 
-    def sample_rate(self, rate: float) -> State:
+    def sample_rate(self, rate: float, max_states: int | None = None) -> State:
+        """States every 1/rate s, end included; ValueError over max_states (None: no cap)."""
         if not rate > 0:
             raise ValueError("sample rate must be positive")
         d = self.duration
+        if max_states is not None:
+            check_sample_count(d, rate, max_states)
         t = np.arange(int(np.floor(d * rate + 1e-9)) + 1) / rate
         if t[-1] < d - 1e-9:
             t = np.append(t, d)

@@ -148,13 +148,18 @@ class PlannerNode:
             plan = multi_robot.plan_formation(starts, goal, bag_pose,
                                               None if not any(size) else size, mode)
             t_start = cv.time_of(req.start_time)
+            per_robot = trajectory.MAX_STATES // len(plan.robots)   # the cap is per response
+            try:
+                samples = [traj.sample_rate(rate, max_states=per_robot) for traj in plan.robots]
+            except ValueError as exc:
+                raise PlanError(INVALID_COMMAND, str(exc)) from exc
             segs = []
-            for traj in plan.robots:
+            for traj, states in zip(plan.robots, samples):
                 seg = self.Segment()
                 seg.header.frame_id = "world"
                 cv.set_time(seg.header.stamp, t_start)
                 seg.flight_mode = str(plan.formation.centre.trajectory.info.get("flight_mode", mode))
-                seg.segment = cv.states_to_msgs(traj.sample_rate(rate), self.ControlState, t_start)
+                seg.segment = cv.states_to_msgs(states, self.ControlState, t_start)
                 segs.append(seg)
             resp.robots, resp.segments = names, segs
             resp.steps = list(plan.formation.steps)
