@@ -23,7 +23,10 @@ from astrobee import rotations as rot
 
 from .mass import MassProperties, with_bag
 from .pd import State
-from .reduced_model import HandleParams, PendulumParams, simulate_bag, simulate_pendulum
+from .mass import robot as robot_mass
+from .reduced_model import (CandidateReferences, Gains, HandleParams, PendulumParams,
+                            ReducedModel, RigidBodyParams, RolloutStart, simulate_bag,
+                            simulate_pendulum, simulate_pendulums)
 from .reference import rest_to_rest
 from .tracking import Tracker
 
@@ -43,6 +46,11 @@ class Recording:
     bag_mass: float
     bag_orientation: np.ndarray | None = None   # (T, 4) [x,y,z,w], bag -> world
     bag_omega: np.ndarray | None = None         # (T, 3) rad/s, world frame
+    reference: tuple | None = None              # (position, velocity, accel (T, 3), orientation
+                                                # (T, 4)): what the tracker followed
+    ff_mass: float = 0.0                        # kg, and inertia (3x3): what the PD law was told
+    ff_inertia: np.ndarray | None = None
+    bag_size: np.ndarray | None = None
 
     @property
     def rotation(self) -> np.ndarray:
@@ -81,18 +89,24 @@ def record(sim, robot_mass: MassProperties, moves: list[tuple[np.ndarray, float]
         while sim.time < end:
             p, q, v, w = sim.robot_state(robot)
             b = sim.bag_state()
-            rows.append((sim.time, p, v, q, b.position, b.velocity, b.orientation, b.omega))
+            ref = traj.sample(sim.time)   # after its end: the final (rest) state
+            rows.append((sim.time, p, v, q, b.position, b.velocity, b.orientation, b.omega,
+                         ref.position, ref.velocity, ref.accel, ref.orientation))
             state = State(np.asarray(p), np.asarray(v), np.asarray(q), rot.rotate_inverse(q, w))
             out = tracker.update(state, sim.time, dt).output
             sim.command(np.concatenate([out.force, out.torque]), robot)
             sim.advance(dt)
         prev = goal
-    t, rp, rv, rq, bp, bv, bq, bw = (np.array(c, float) for c in zip(*rows))
-    return Recording(t, rp, rv, rq, bp, bv, float(bag.mass), bq, bw)
+    t, rp, rv, rq, bp, bv, bq, bw, fp, fv, fa, fq = (np.array(c, float) for c in zip(*rows))
+    ff = tracker.pd.mass
+    return Recording(t, rp, rv, rq, bp, bv, float(bag.mass), bq, bw, (fp, fv, fa, fq),
+                     float(ff.mass), np.asarray(ff.inertia, float), np.asarray(bag.size, float))
 
 
 def predict(handle: "HandleParams | PendulumParams", rec: Recording) -> np.ndarray:
     """Bag-centre positions (T, 3) the handle model predicts for a recording's robot motion."""
+    if isinstance(handle, RigidBodyParams):   # held rigidly: the offset turned with the robot
+        return rec.robot_position + np.einsum("tij,j->ti", rec.rotation, handle.rest_offset)
     sim = simulate_pendulum if isinstance(handle, PendulumParams) else simulate_bag
     x, _ = sim(handle, rec.bag_mass, rec.t, rec.robot_position, rec.robot_velocity,
                rec.rotation, rec.bag_position[0], rec.bag_velocity[0])
@@ -141,12 +155,28 @@ def _fit_from(recordings: list[Recording], k0: float, c0: float,
 
 
 def fit_pendulum(recordings: list[Recording], lever_length: float = 0.25,
-                 starts=((1.0, 0.3), (10.0, 1.0), (0.1, 0.1))) -> PendulumParams:
+                 starts=((3.0, 0.5), (30.0, 3.0))) -> PendulumParams:
     """Least-squares pendulum parameters (reduced_model.PendulumParams) over recordings: log
     rotational stiffness and damping per body axis, rest offset, lever (hinge -> centre) and
-    log inertia per body axis; one solve per (stiffness, damping) start, the best kept."""
+    log inertia per body axis; one solve per (stiffness, damping) start, the best kept. The
+    Jacobian's finite differences run batched (simulate_pendulums)."""
     fits = [_fit_pendulum_from(recordings, lever_length, *s) for s in starts]
     return min(fits, key=lambda f: f[1])[0]
+
+
+def _pendulum_unpack(x: np.ndarray) -> PendulumParams:
+    return PendulumParams(np.exp(x[:3]), np.exp(x[3:6]), x[6:9], x[9:12], np.exp(x[12:15]))
+
+
+def _pendulum_residuals(xs: np.ndarray, recordings: list[Recording]) -> np.ndarray:
+    """Bag-centre residuals (B, 3 T_total) of B parameter vectors."""
+    hs = [_pendulum_unpack(x) for x in xs]
+    out = []
+    for r in recordings:
+        pos, _ = simulate_pendulums(hs, r.bag_mass, r.t, r.robot_position, r.robot_velocity,
+                                    r.rotation, r.bag_position[0], r.bag_velocity[0])
+        out.append((pos - r.bag_position).reshape(len(hs), -1))
+    return np.concatenate(out, axis=1)
 
 
 def _fit_pendulum_from(recordings: list[Recording], lever_length: float, k0: float,
@@ -157,17 +187,58 @@ def _fit_pendulum_from(recordings: list[Recording], lever_length: float, k0: flo
     l0 = lever_length * d0 / np.linalg.norm(d0)
     x0 = np.concatenate([np.full(3, np.log(k0)), np.full(3, np.log(c0)), d0, l0,
                          np.full(3, np.log(0.25))])
-
-    def unpack(x: np.ndarray) -> PendulumParams:
-        return PendulumParams(np.exp(x[:3]), np.exp(x[3:6]), x[6:9], x[9:12], np.exp(x[12:15]))
-
-    def residuals(x: np.ndarray) -> np.ndarray:
-        h = unpack(x)
-        return np.concatenate([(predict(h, r) - r.bag_position).ravel() for r in recordings])
-
-    lo = np.concatenate([np.full(6, np.log(1e-3)), d0 - 0.1, l0 - 0.25, np.full(3, np.log(0.02))])
-    hi = np.concatenate([np.full(3, np.log(1e4)), np.full(3, np.log(1e3)), d0 + 0.1, l0 + 0.25,
+    lo = np.concatenate([np.full(6, np.log(1e-3)), d0 - 0.1, l0 - 0.2, np.full(3, np.log(0.02))])
+    hi = np.concatenate([np.full(3, np.log(1e4)), np.full(3, np.log(1e3)), d0 + 0.1, l0 + 0.2,
                          np.full(3, np.log(5.0))])
-    sol = least_squares(residuals, np.clip(x0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi),
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        h = 1e-6 * np.maximum(1.0, np.abs(x))
+        steps = np.where(x + h > hi, -h, h)
+        xs = np.vstack([x, x + np.diag(steps)])
+        r = _pendulum_residuals(xs, recordings)
+        return ((r[1:] - r[0]) / steps[:, None]).T
+
+    sol = least_squares(lambda x: _pendulum_residuals(x[None], recordings)[0],
+                        np.clip(x0, lo + 1e-9, hi - 1e-9), jac=jac, bounds=(lo, hi),
                         x_scale="jac", max_nfev=60)
-    return unpack(sol.x), float(sol.cost)
+    return _pendulum_unpack(sol.x), float(sol.cost)
+
+
+def rigid_body(recordings: list[Recording]) -> RigidBodyParams:
+    """The rigid-body model's one parameter: the mean body-frame bag offset of the recordings."""
+    return RigidBodyParams(np.mean([r.body_offsets().mean(axis=0) for r in recordings], axis=0))
+
+
+def horizon_error(handle, rec: Recording, flight_mode, horizon: float = 5.0,
+                  every: float = 1.0) -> dict:
+    """What the MPC relies on: from the recorded state every `every` s, roll the model out
+    with the PD law on the recorded reference for `horizon` s (ReducedModel.rollout, rotation
+    of the reference, the recorded robot attitude and rate at the start) and compare bag and
+    robot centres with the recording (world frame, m): RMS over all windows and steps, max."""
+    fp, fv, fa, fq = rec.reference
+    ref_rot = np.array([rot.to_matrix(q) for q in fq])
+    dt = float(np.median(np.diff(rec.t)))
+    k = max(2, int(round(horizon / dt)))
+    stride = max(1, int(round(every / dt)))
+    gains = Gains.from_flight_mode(flight_mode)
+    model = ReducedModel(handle)
+    I_r = robot_mass().inertia
+    eb, er = [], []
+    for s in range(0, len(rec.t) - k - 1, stride):
+        q = rec.robot_orientation[s]
+        R = rot.to_matrix(q)
+        w_b = np.zeros(3)
+        if s > 0:   # body rate from the recorded attitudes
+            w_b = rot.to_rotvec(rot.multiply(rot.conjugate(rec.robot_orientation[s - 1]), q)) / dt
+        r_rel = R.T @ rot.to_matrix(rec.bag_orientation[s])
+        start = RolloutStart(rec.robot_position[s], rec.robot_velocity[s], robot_mass().mass,
+                             rec.ff_mass, rec.bag_position[s], rec.bag_velocity[s], rec.bag_mass,
+                             rec.bag_size, None, r_rel, q, w_b, I_r, rec.ff_inertia)
+        sr, sl = slice(s, s + k), slice(s + 1, s + 1 + k)   # reference at step i -> state i+1
+        refs = CandidateReferences(fp[None, sr], fv[None, sr], fa[None, sr], ref_rot[sr], dt)
+        out = model.rollout(start, refs, gains)
+        eb.append(np.linalg.norm(out.bag_position[0] - rec.bag_position[sl], axis=1))
+        er.append(np.linalg.norm(out.robot_position[0] - rec.robot_position[sl], axis=1))
+    eb, er = np.concatenate(eb), np.concatenate(er)
+    return {"bag_rms": float(np.sqrt(np.mean(eb ** 2))), "bag_max": float(eb.max()),
+            "robot_rms": float(np.sqrt(np.mean(er ** 2)))}
