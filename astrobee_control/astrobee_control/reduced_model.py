@@ -1,24 +1,31 @@
 """Rollout model A: a closed-form reduced-order model of Astrobee carrying a cargo bag.
 
-The robot is a translational rigid body of mass m_r; the bag is a point mass m_b tied to the
-robot's body frame by a linear spring-damper: the bag centre rests at `rest_offset` (body
-frame) and is pulled back by per-body-axis stiffness k and damping c. This is the paper's
-"closed-form reduced-order model integrated without a simulator in the loop" (its future work):
-the swing and lag of the bag behind an accelerating robot, nothing of the bag's shape.
+Three kinds of handle, chosen per bag model in config/reduced_models.yaml (bench/sysid_bag.py):
+- RigidBodyParams (`kind: rigid_body`, the FEM bag's): robot + bag one rigid body. The PD force
+  acts at the robot's centre, 0.25 m off the pair's centre of mass, and Astrobee's torque limits
+  (0.02-0.07 N m) are an order below the torque that makes, so the pair turns (measured on the
+  fast FEM bag, 412 nodes: up to 109 deg during the identification moves) and the body-frame
+  force limits turn with it. The rollout integrates the attitude (the PD law's attitude part,
+  clipped) every ATTITUDE_STEP with the force's torque about the compound centre; the bag sits
+  rigidly at its observed offset and its corners turn with the pair (Rollouts.bag_turn).
+- HandleParams (no kind): the bag a point mass on a body-frame spring-damper + drag, the robot's
+  attitude taken from the reference. Kept for the constraint/rigid bags.
+- PendulumParams (`kind: pendulum`): the bag a rigid box swinging about the grasp point on a
+  rotational spring-damper, attitude from the reference.
+Decision (numbers of bench/sysid_bag.py, fast FEM at 412 nodes, held-out motion): the bag's
+own swing relative to the robot is small (9.5 mm RMS); driven by the recorded robot motion the
+spring explains none of it (11.1 mm), the pendulum little (10.5 mm), the rigid offset as much
+(10.1 mm). What the MPC relies on, 5 s closed-loop rollouts from the recorded state: bag centre
+RMS 55.3 mm (max 177) for the rigid body against 188.5 mm (spring fitted on the fast FEM) and
+245.1 mm (spring fitted on Bullet's FEM, 250 nodes); robot 9.2 mm against 373/90 mm. So the
+turning pair is what was missing; the swing about the handle is not worth its cost.
 
-Attitude is not integrated: the robot's attitude loop is fast beside the position loop, so the
-rollout takes the robot's orientation to be the reference's (one rotation per time step, shared
-by every candidate). The PD law in the rollout is pd.py's position part (feed-forward
-acceleration + Kp e_p + Kd e_v, times the feed-forward mass, clipped per body axis to the flight
-mode's force limits), without the tiny integral term.
+The PD law in the rollout is pd.py's (feed-forward + Kp e + Kd e_v, times the told mass/inertia,
+clipped per body axis), without the small integral terms. Everything is vectorised over the N
+candidates: one step is a dozen numpy operations on (N, 3) / (N, 3, 3) arrays.
 
-Integration: semi-implicit with the spring-damper solved implicitly per body axis (backward
-Euler of the relative coordinate, exact centre-of-mass update), so a stiff handle (a rigid
-ball-joint bag identifies at k ~ 1e3 N/m) stays stable at a 40 ms rollout step. Everything is
-vectorised over the N candidates: one step is a dozen numpy operations on (N, 3) arrays.
-
-`simulate_bag` is the same spring-damper driven by a recorded (kinematic) robot motion: what the
-system identification (sysid.py) fits and reports its error with.
+`simulate_bag` / `simulate_pendulum` drive the spring / pendulum by a recorded (kinematic) robot
+motion: what the system identification (sysid.py) fits.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""System identification of rollout model A's handle (reduced_model.HandleParams) from a bag
-simulation.
+"""System identification of rollout model A's handle (reduced_model: HandleParams,
+PendulumParams, RigidBodyParams) from a bag simulation.
 
 Procedure (bench/sysid_bag.py runs it for every bag model and writes config/reduced_models.yaml):
 1. `record`: the PD tracker (tracking.Tracker, told the bag's mass) flies the robot through a
@@ -12,6 +12,11 @@ Procedure (bench/sysid_bag.py runs it for every bag model and writes config/redu
    minimises the bag-centre position error.
 3. `error`: the same prediction on a held-out motion (another seed) gives the identification
    error that is reported (RMS and max of the bag-centre position error, m).
+4. `horizon_error`: what the MPC relies on: 5 s closed-loop rollouts of the model (PD law,
+   recorded reference) started every 1 s from the recorded state, bag and robot error (world).
+   On the FEM bag the robot-bag pair turns (torque-limited Astrobee), which only this error
+   sees; `rigid_body` (no fit: the mean offset) wins it 3-4x over the spring (see
+   reduced_model's docstring), `fit_pendulum` is kept for the swing about the handle.
 """
 from __future__ import annotations
 
