@@ -12,16 +12,18 @@ from astrobee_control.law import BagObservation, ControlLaw
 from astrobee_control.mpc import MpcConfig, MpcLaw
 from astrobee_control.mpc_controller_node import make_mpc_law
 from astrobee_control.pd import State
-from astrobee_control.reduced_model import HandleParams, ReducedModel, identified_handles
+from astrobee_control.reduced_model import (HandleParams, ReducedModel, RigidBodyParams,
+                                            identified_handles)
 from astrobee_control.reference import rest_to_rest
 from astrobee_control.tracking import CONTROLLING
 
 Q = np.array([0.0, 0.0, -0.7071067811865476, 0.7071067811865476])   # facing -y (to the JEM)
 HANDLE = HandleParams([29.4, 1e5, 1.46], [20.8, 0.01, 1.05], [-0.477, -0.005, -0.047])
+RIGID = RigidBodyParams([-0.484, -0.001, -0.064])     # the FEM bag's model (turning pair)
 
 
-def _law(samples: int = 64) -> MpcLaw:
-    return MpcLaw(flight_modes.get("nominal"), mp.robot(), ReducedModel(HANDLE),
+def _law(samples: int = 64, handle=HANDLE) -> MpcLaw:
+    return MpcLaw(flight_modes.get("nominal"), mp.robot(), ReducedModel(handle),
                   MpcConfig(samples=samples))
 
 
@@ -29,14 +31,15 @@ def test_mpc_is_a_control_law():
     assert isinstance(_law(), ControlLaw)
 
 
-def test_mpc_picks_a_collision_free_candidate_where_the_nominal_hits_the_ceiling():
+@pytest.mark.parametrize("handle", [HANDLE, RIGID], ids=["spring", "rigid_body"])
+def test_mpc_picks_a_collision_free_candidate_where_the_nominal_hits_the_ceiling(handle):
     # Node 2 ceiling at z = 6.058; the nominal reference rises 0.3 m in 8 s into it (a planted
     # offset) while a bump sends robot and bag up at 2 cm/s
     p0 = np.array([10.95, 0.0, 5.7])
-    law = _law(128)
+    law = _law(128, handle)
     nominal = rest_to_rest(p0, p0 + [0, 0, 0.3], Q, Q, 8.0)
     state = State(p0, np.array([0, 0, 0.02]), Q, np.zeros(3))
-    bag = BagObservation(p0 + rot.rotate(Q, HANDLE.rest_offset), Q, np.array([0, 0, 0.02]),
+    bag = BagObservation(p0 + rot.rotate(Q, handle.rest_offset), Q, np.array([0, 0, 0.02]),
                          np.zeros(3), True, 10.0, np.array([0.5, 0.42, 0.25]))
     law.observe_bag(bag, state)
     law.follow(nominal, 0.0)
