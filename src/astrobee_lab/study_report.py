@@ -146,12 +146,16 @@ def write_report(study: Any, rows: list[dict], folder: str | Path) -> Path:
     plots = folder / "plots"
     plots.mkdir(parents=True, exist_ok=True)
     total = len(study.flights)
+    errors = [r for r in rows if r.get("status") == "error"]
+    rows = [r for r in rows if r.get("status") != "error"]   # not flown: no verdict to count
     lines = [f"# Study {study.name}", ""]
     if study.description:
         lines += [study.description.strip(), ""]
-    lines += [f"{len(rows)} of {total} rows finished "
-              f"({sum(r.get('status') == 'error' for r in rows)} errors). "
-              "Table: results.csv; per flight: flights/<key>.json.", ""]
+    lines += [f"{len(rows)} of {total} rows flown"
+              + (f", {len(errors)} ended in an error (left out below; flown again on resume: "
+                 + "; ".join(sorted({str(r.get('cause'))[:100] for r in errors})) + ")"
+                 if errors else "")
+              + ". Table: results.csv; per flight: flights/<key>.json.", ""]
     blocks = list(dict.fromkeys(f.block for f in study.flights))
     if len(blocks) > 1 and rows:
         lines += ["## All flights, per controller", "", block_table(rows, []), ""]
