@@ -60,9 +60,11 @@ FAULT_WATCH_SIM, FAULT_WATCH_WALL = 0.5, 3.0
 # segment before the common start stamp, so the robots start together.
 FORMATION_LEAD = 0.5
 # Deterministic runs: the segments start this long (sim s) after the reset's t=0 (the sim is
-# paused until every controller holds its segment, so no lead is needed), and the sim runs in
-# chunks of CHUNK_STEPS physics steps (1 s at the default 350 Hz) once the plan is flown.
-HANDOVER_LEAD = 0.0
+# paused until every controller holds its segment; the lead lets each controller hold the start
+# with the cargo bag observed and a freshly built bag settle a moment, as a mission planning
+# in a running sim had), and the sim runs in chunks of CHUNK_STEPS physics steps (1 s at the
+# default 350 Hz) once the plan is flown.
+HANDOVER_LEAD = 1.0
 CHUNK_STEPS = 350
 
 
@@ -257,6 +259,7 @@ class MissionClient:
         # (killed, even -9) ends the wait at once, named
         self.peers = PeerWatch(node, nodes=PEERS)
         self.scenario_count = 0             # /sim/scenario messages received (one per reset)
+        self.sim_robots: set[str] = set()   # every robot the sim has built (has topics for)
         self.latched = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
         self.deep_latched = QoSProfile(depth=50, durability=Durability.TRANSIENT_LOCAL)
         self.watches: dict[str, RobotWatch] = {}
@@ -299,6 +302,7 @@ class MissionClient:
     def _on_scenario(self, msg: Any) -> None:
         self.scenario_info = msg
         self.scenario_count += 1
+        self.sim_robots.update(str(r) for r in msg.robots)
 
     def _on_realism(self, msg: Any) -> None:
         """/sim/realism (YAML: knobs, schedule, applied), recorded with each leg."""
@@ -482,7 +486,7 @@ class MissionClient:
         for attempt in range(2):
             self.spin_until(lambda: not self._graph_not_ready(robots), ready_timeout,
                             lambda: f"the graph ready for {name} ({self._graph_not_ready(robots)})")
-            known = set(self.watches)
+            known, had = set(self.watches), set(self.sim_robots)
             for w in self.watches.values():     # what comes now answers this reset
                 w.pose, w.cmd_ns = None, -1
             count = self.scenario_count
@@ -502,7 +506,9 @@ class MissionClient:
             # every controller has answered the state of t=0 before its segment comes
             self.spin_until(lambda: not late(), ready_timeout,
                             lambda: f"the state of t=0 answered by every controller ({late()} did not)")
-            if len(ws) == len(built) and not self._graph_not_ready(built) or attempt:
+            # a robot the sim never had: its topics are new, no recorder had them at the reset
+            # (decided by the scenario, not by how fast the recorder subscribes)
+            if attempt or (len(ws) == len(built) and set(built) <= had):
                 break
             robots = built
 
@@ -513,7 +519,8 @@ class MissionClient:
         at each chunk's end; that the robots stopped is read once every controller has answered
         the last tick, so the leg ends at a tick the flight fixes, whatever the wall clock."""
         deadline = time.monotonic() + wall_timeout
-        steps = min(int(math.ceil((duration + 1.0) * CHUNK_STEPS)), MAX_RESUME_STEPS)
+        first = HANDOVER_LEAD + duration + 1.0      # the lead, the plan and a settling second
+        steps = min(int(math.ceil(first * CHUNK_STEPS)), MAX_RESUME_STEPS)
         while True:
             resp = self._control(mc.SimControl.RESUME, steps, 30.0, "resume")
             t_end = mc.stamp_ns(resp.sim_time)
@@ -643,6 +650,8 @@ class MissionClient:
                                if len(ws) > 1 else f"flight aborted on a fault: {first.faults[0][1]}")
         t_acc = min(next(t for t, s, _ in w.mob_changes[marks[w.name]:] if s == CONTROLLING)
                     for w in ws)
+        if self.handover:       # the flight starts at the hand-over time, after the lead
+            t_acc = max(t_acc, t_sent + HANDOVER_LEAD)
         res.duration = max(w.done_since(marks[w.name]) for w in ws) - t_acc
         wall = time.monotonic() - wall_sent
         res.real_time_factor = res.sim_time / wall if wall > 0 else None
