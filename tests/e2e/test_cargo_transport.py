@@ -280,8 +280,10 @@ def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
 
 
 def test_safety_filter_in_the_loop_is_transparent(tmp_path, config_dir, launches):
-    """safety:=true puts the CBF filter between the controller and the sim: the nominal flight
-    is unchanged (goal reached, no contact) and the filter reports no intervention."""
+    """safety:=true puts the CBF filter between the controller and the sim, inside the
+    controller's process: the nominal flight is unchanged (goal reached, no contact) and the
+    filter reports no intervention on the same latched /gnc/ctl/safety diagnostics as the
+    separate safety_filter_node (safety:=node) publishes; no command_nominal hop."""
     run = tmp_path / "run"
     launch = Launch(run, config_dir, "scenario:=short_hop", "safety:=true")
     launches.append(launch)
@@ -291,7 +293,7 @@ def test_safety_filter_in_the_loop_is_transparent(tmp_path, config_dir, launches
     assert summary["success"], summary["reason"]
     assert summary["contacts"] == 0
     msgs = mcap_messages(run / "bag")
-    assert "/gnc/ctl/command_nominal" in msgs and "/gnc/ctl/command" in msgs
+    assert "/gnc/ctl/command_nominal" not in msgs and "/gnc/ctl/command" in msgs
     diag = msgs["/gnc/ctl/safety"][-1].status[0]
     values = {kv.key: kv.value for kv in diag.values}
     assert int(values["ticks"]) > 100 and int(values["active_ticks"]) == 0, values

@@ -99,12 +99,16 @@ def test_plot_of_a_failed_two_robot_leg(tmp_path):
 
 
 def test_launch_starts_a_controller_and_filter_per_robot_in_its_namespace(tmp_path):
-    """No process: the launch description of two_robots_bag with safety:=true lists one
+    """No process: the launch description of two_robots_bag with safety:=node lists one
     controller and one safety filter per robot, each in the robot's namespace, the controller's
-    command remapped (relative, so inside the namespace), each with half the bag's mass."""
+    command remapped (relative, so inside the namespace), each with half the bag's mass; with
+    safety:=true the filter runs inside each controller (its safety parameter): no filter
+    process, no remap."""
+    import pytest
+
     from astrobee_bringup.launch import cargo_transport
-    from astrobee_bringup.launcher import LaunchContext, Launcher, find_config_dir
-    ctx = LaunchContext({"scenario": "two_robots_bag", "safety": "true", "controller": "mpc"},
+    from astrobee_bringup.launcher import LaunchContext, LaunchError, Launcher, find_config_dir
+    ctx = LaunchContext({"scenario": "two_robots_bag", "safety": "node", "controller": "mpc"},
                         find_config_dir(), tmp_path, False, 7447)
     specs = {s.name: s for s in cargo_transport.generate_nodes(ctx)}
     for name, ns in (("", ""), ("bumble/", "bumble")):
@@ -114,6 +118,24 @@ def test_launch_starts_a_controller_and_filter_per_robot_in_its_namespace(tmp_pa
         assert {"use_sim_time": True, "bag_mass": 5.0} in ctl.parameters
         argv = Launcher(list(specs.values()), astrobee_cmd=["astrobee"]).argv_for(ctl)
         assert (f"__ns:={ns}" in argv) == bool(ns)
+    inproc = LaunchContext({"scenario": "two_robots_bag", "safety": "true", "controller": "mpc"},
+                           find_config_dir(), tmp_path, False, 7447)
+    specs = {s.name: s for s in cargo_transport.generate_nodes(inproc)}
+    assert not any("safety_filter" in n for n in specs)
+    for name in ("", "bumble/"):
+        ctl = specs[f"{name}mpc_controller_node"]
+        assert ctl.ros_args == [] and {"use_sim_time": True, "bag_mass": 5.0, "safety": True} \
+            in ctl.parameters
+    off = LaunchContext({"scenario": "node2_to_jem", "safety": "false"}, find_config_dir(),
+                        tmp_path, False, 7447)
+    specs = cargo_transport.generate_nodes(off)
+    assert not any("safety" in p for s in specs for p in s.parameters if isinstance(p, dict))
+    default = LaunchContext({"scenario": "node2_to_jem"}, find_config_dir(), tmp_path, False, 7447)
+    ctl = {s.name: s for s in cargo_transport.generate_nodes(default)}["pd_controller_node"]
+    assert any(p.get("safety") is True for p in ctl.parameters if isinstance(p, dict))
+    with pytest.raises(LaunchError, match="safety must be"):
+        cargo_transport.generate_nodes(LaunchContext({"safety": "maybe"}, find_config_dir(),
+                                                     tmp_path, False, 7447))
     one = LaunchContext({"scenario": "node2_to_jem_bag"}, find_config_dir(), tmp_path, False, 7447)
     ctls = [s for s in cargo_transport.generate_nodes(one) if s.name.endswith("controller_node")]
     assert [(s.name, s.namespace) for s in ctls] == [("pd_controller_node", "")]

@@ -9,8 +9,11 @@ false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / fligh
 robots / realism (a preset of config/realism.yaml) (override the scenario: validated here
 with the scenario before any process starts, then built by sim_node, which publishes the
 result on /sim/scenario for the others), mission (true | false: run the mission client,
-default true), safety (true | false: the CBF safety filter node between the controller and
-the sim, default false). One controller (and
+default true), safety (the CBF safety filter between the controller and the sim: true = in
+the controller's process (its `safety` parameter: no extra process, no extra hop in the
+lockstep loop), node = a safety_filter_node of its own between a controller's
+gnc/ctl/command_nominal and the sim (for a controller that is not ours), false = none; default
+true). One controller (and with safety:=node one
 safety filter) per robot of the scenario, in the robot's namespace (`bumble/pd_controller_node`
 publishes /bumble/gnc/ctl/command); with a bag held by several robots each controller takes
 its share of the bag's mass. video (true | false:
@@ -40,6 +43,12 @@ from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flat
 
 CONTROLLERS = ("pd", "mpc")
 DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
+# on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
+# controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
+SAFETY_DEFAULT = "true"
+SAFETY_MODES = {"true": "controller", "yes": "controller", "1": "controller", "on": "controller",
+                "controller": "controller", "node": "node",
+                "false": "", "no": "", "0": "", "off": ""}
 
 # the launch arguments, for `astrobee launch cargo_transport --show-args`: name -> (default, what)
 ARGUMENTS = {
@@ -52,7 +61,9 @@ ARGUMENTS = {
     "record": ("true", "record every topic into bag_dir"),
     "bag_dir": ("<run>/bag", "where the recording goes"),
     "mission": ("true", "run the mission client (its exit ends the launch)"),
-    "safety": ("false", "the CBF safety filter between controller and sim"),
+    "safety": (SAFETY_DEFAULT, "the CBF safety filter between controller and sim: true (inside "
+               "the controller's process) | node (a safety_filter_node of its own, for a "
+               "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
     "demo": ("false", "fly DEMO_LEGS (no bag, FEM bag with PD, FEM bag with MPC), the sim reset between"),
     "bag_model": ("", "scenario override: fem | constraint | composite | rigid"),
@@ -147,7 +158,9 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     for key, value in overrides.items():     # the sim builds the scenario with the overrides
         sim_params[key] = ",".join(value) if isinstance(value, list) else value
     mission = ctx.flag("mission", True)
-    safety = ctx.flag("safety", False)
+    safety = SAFETY_MODES.get(ctx.arg("safety", SAFETY_DEFAULT).strip().lower())
+    if safety is None:
+        raise LaunchError(f"safety must be true, node or false, got '{ctx.arg('safety')}'")
     # deterministic lockstep: the sim paused until the mission has the graph ready and hands
     # the segment over at a fixed sim time (mission --handover): the same seed, the same bag
     handover = mission and clock == "lockstep"
@@ -167,12 +180,16 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
             per_robot["bag_mass"] = shares[robot]
         if kinds[robot] == "mpc" and "seed" in sim_params:     # its sampling, seeded by the run's
             per_robot["seed"] = sim_params["seed"]
+        if safety == "controller":      # the CBF filter inside the controller's process
+            per_robot["safety"] = True
         ctl_name = f"{kinds[robot]}_controller_node"
         nodes.append(NodeSpec(f"{robot}/{ctl_name}" if robot else ctl_name, "astrobee_control",
-                              ctl_name, parameters=[ctl_params[kinds[robot]], per_robot], namespace=robot,
+                              ctl_name, parameters=[ctl_params[kinds[robot]], per_robot],
+                              namespace=robot,
                               required=not mission,
-                              ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"] if safety else []))
-        if safety:    # the CBF filter between the controller and the sim
+                              ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"]
+                              if safety == "node" else []))
+        if safety == "node":    # the CBF filter in a process of its own between controller and sim
             nodes.append(NodeSpec(f"{robot}/safety_filter_node" if robot else "safety_filter_node",
                                   "astrobee_control", "safety_filter_node", namespace=robot,
                                   parameters=[{"use_sim_time": True}], required=not mission))
