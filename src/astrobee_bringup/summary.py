@@ -1,7 +1,8 @@
 """Run summary: time series of a flight (live or read back from the recording), its figures of
 merit per robot, the verdict of a leg (`leg_verdict`: every robot at its goal, no contact, no
-fault; decided by astrobee.task's TaskMonitor, so the mission and the Task never disagree), summary.json and the plot PNG (every robot's path over the labelled modules, tracking
-errors, clearance, and where and why a failed leg failed).
+fault; decided by astrobee.task's TaskMonitor, so the mission and the Task never disagree),
+summary.json and the plot PNG (every robot's path over the labelled modules, tracking errors,
+clearance, and where and why a failed leg failed).
 
 Wording: "cargo bag" is the carried bag; "recording" is the rosbag2 directory of the run.
 """
