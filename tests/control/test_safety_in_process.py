@@ -163,6 +163,8 @@ def test_law_filter_diagnostics_pace_and_content():
     assert lf.diagnostics_due(res, 0.0) and "transparent" in lf.transition(res)
     assert not lf.diagnostics_due(res, 0.2)
     assert lf.diagnostics_due(res, 0.6) and lf.transition(res) == ""
+    # a simulation reset sends the clock back: the pace starts anew (not silent until t > 0.6)
+    assert lf.diagnostics_due(res, 0.0) and not lf.diagnostics_due(res, 0.3)
     level, message, pairs = lf.status(res)
     assert (level, message) == (0, "transparent")
     assert [k for k, _ in pairs] == ["active", "delta_norm", "slack", "min_barrier", "omega_barrier",

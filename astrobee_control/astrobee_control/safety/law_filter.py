@@ -109,9 +109,10 @@ class LawFilter:
     # ---- diagnostics ------------------------------------------------------------------
     def diagnostics_due(self, res: SafetyResult, t: float) -> bool:
         """Whether the diagnostics of `res` at time t (s) are to be published: on a change of
-        the active/fallback state, else at most every diag_period. Marks them published."""
+        the active/fallback state, else at most every diag_period; a clock gone back (a
+        simulation reset) starts the pace anew. Marks them published."""
         key = (bool(res.active), bool(res.fallback))
-        if key == self._diag_key and t - self._diag_t < self.diag_period:
+        if key == self._diag_key and 0.0 <= t - self._diag_t < self.diag_period:
             return False
         self._changed = key != self._diag_key
         self._diag_key, self._diag_t = key, t
