@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import graph_env
+from conftest import ASTROBEE, graph_env   # at import time: "conftest" is another folder's later
 
 
 def _rosmsg(name):
@@ -64,7 +64,6 @@ def test_urdf_is_the_sims_astrobee():
 def test_recorded_run_decodes_whole_with_mcap_ros2(procs, port, tmp_path):
     """A short graph run with the FEM cargo bag (no mission: stopped by Ctrl-C once the viewer
     topics are recorded): every message decodes with mcap-ros2-support."""
-    from conftest import ASTROBEE
     run = tmp_path / "run"
     p = procs([ASTROBEE, "launch", "cargo_transport", "scenario:=node2_to_jem_bag",
                "bag_model:=fem", "fem_solver:=fast", "bag_resolution:=200", "mission:=false",
