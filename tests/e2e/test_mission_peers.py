@@ -1,7 +1,8 @@
-"""The mission notices a simulator killed outside the launcher (kill -9) by the graph: the leg
-fails with "lost node sim_node" at once instead of waiting out its 600 s timeout (issue 19.8).
-Router, sim_node (rigid backend, lockstep), planner, PD controller and the mission, each its
-own process; bounded waits, nothing left behind."""
+"""The mission notices a peer killed outside the launcher (kill -9) by the graph: the simulator
+or the flying robot's controller. The leg fails naming it ("lost node sim_node", "lost node
+pd_controller_node ...") in bounded time instead of waiting out its 600 s timeout (issue
+19.8). Router, sim_node (rigid backend, lockstep), planner, PD controller and the mission, each
+its own process; nothing left behind."""
 from __future__ import annotations
 
 import json
@@ -15,17 +16,21 @@ from roszen import testing  # noqa: E402
 pytestmark = pytest.mark.graph
 
 
-def test_killed_sim_fails_the_leg_naming_it(tmp_path):
+@pytest.mark.parametrize("victim", ["sim_node", "pd_controller_node"])
+def test_killed_peer_fails_the_leg_naming_it(tmp_path, victim):
     run = tmp_path / "run"
     with testing.router() as port:
         env = testing.zenoh_env(port)
-        sim = testing.spawn(testing.python_cmd(
-            "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "backend:=rigid",
-            "-p", "scenario:=node2_to_jem", "-p", "clock_mode:=lockstep",
-            "-p", "lockstep_timeout:=20.0", "-p", "lockstep_start_timeout:=120.0"), env)
-        procs = [sim, testing.spawn(testing.python_cmd("-m", "astrobee_planning.planner_node"), env),
-                 testing.spawn(testing.python_cmd("-m", "astrobee_control.pd_controller_node",
-                                                  "--ros-args", "-p", "use_sim_time:=true"), env)]
+        peers = {
+            "sim_node": testing.spawn(testing.python_cmd(
+                "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "backend:=rigid",
+                "-p", "scenario:=node2_to_jem", "-p", "clock_mode:=lockstep",
+                "-p", "lockstep_timeout:=20.0", "-p", "lockstep_start_timeout:=120.0"), env),
+            "planner_node": testing.spawn(testing.python_cmd("-m", "astrobee_planning.planner_node"),
+                                          env),
+            "pd_controller_node": testing.spawn(testing.python_cmd(
+                "-m", "astrobee_control.pd_controller_node", "--ros-args",
+                "-p", "use_sim_time:=true"), env)}
         mission = testing.spawn(testing.python_cmd(
             "-m", "astrobee_bringup.mission", "--scenario", "node2_to_jem", "--run-dir", str(run)),
             env)
@@ -41,13 +46,15 @@ def test_killed_sim_fails_the_leg_naming_it(tmp_path):
                 assert mission.poll() is None, mission.communicate()[0][-2000:]
                 assert time.monotonic() < end, "the flight never started"
                 node.spin_once(timeout_sec=0.05)
-            testing.kill9(sim)
+            testing.kill9(peers[victim])
             out, err = mission.communicate(timeout=120)  # far below the 600 s leg timeout
-            assert mission.returncode != 0
+            assert mission.returncode == 1, out[-2000:] + err[-2000:]
             leg = json.loads((run / "summary.json").read_text())["legs"][0]
-            assert not leg["success"] and leg["reason"] == "lost node sim_node", leg["reason"]
+            assert not leg["success"]
+            assert leg["reason"].startswith(f"lost node {victim}"), leg["reason"]
+            assert f"lost node {victim}" in out.strip().splitlines()[-1]   # the mission's last line
         finally:
             node.destroy_node()
             ctx.shutdown()
-            for p in [mission, *procs]:
+            for p in [mission, *peers.values()]:
                 testing.stop(p)
