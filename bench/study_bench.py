@@ -7,7 +7,7 @@ Overhead per flight = (workers x elapsed - sum of the flights' own wall times) /
 against the mean flight: what the backend adds (process start, imports, scheduling, result
 transfer, the atomic row writes).
 
-Usage: python bench/study_bench.py [--flights 6] [--workers 2]
+Usage: python bench/study_bench.py [--flights 12] [--workers 2]
 """
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def line(name: str, elapsed: float, rows: list[dict], workers: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--flights", type=int, default=6)
+    p.add_argument("--flights", type=int, default=12)
     p.add_argument("--workers", type=int, default=2)
     a = p.parse_args(argv)
     load = os.getloadavg()[0]
