@@ -421,9 +421,9 @@ def parse_study(data: Any, default_name: str = "study", where: str = "study",
                     built = build_scenario(spec)
                 except ValueError as exc:        # ScenarioError is a ValueError
                     raise StudyError(f"{fw}: {exc}") from None
-                if len(built.robots) != 1 or built.goal_position is None:
-                    raise StudyError(f"{fw}: scenario {built.name!r} needs one robot and a goal "
-                                     "(in-process flights fly one robot)")
+                if not 1 <= len(built.robots) <= 2 or built.goal_position is None:
+                    raise StudyError(f"{fw}: scenario {built.name!r} needs one or two robots "
+                                     "and a goal (what an in-process Flight flies)")
                 scenarios_ok.add(sc_key)
             flights.append(FlightSpec(flight_key(spec), spec, label, bname, swept, len(flights)))
             if len(flights) > MAX_FLIGHTS:
