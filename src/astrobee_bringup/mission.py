@@ -524,11 +524,14 @@ class MissionClient:
         while True:
             resp = self._control(mc.SimControl.RESUME, steps, 30.0, "resume")
             t_end = mc.stamp_ns(resp.sim_time)
-            self.spin_until(lambda: all(w.cmd_ns >= t_end for w in ws),
+            # the last tick's answers and its pose: under load the pose of t_end can come after
+            # the controllers' answers to it (another publisher, another path through the router)
+            self.spin_until(lambda: all(w.cmd_ns >= t_end and w.sim_time == w.sim_time
+                                        and mc.to_ns(w.sim_time) >= t_end for w in ws),
                             max(1.0, deadline - time.monotonic()), "the end of the flight", tick)
-            # everything received before the last tick's answers (its pose, the states and
-            # faults of earlier ticks) runs now: the executor serves topics in turn, not in
-            # the order they came
+            # everything received before the last tick's answers (the states and faults of
+            # earlier ticks) runs now: the executor serves topics in turn, not in the order
+            # they came
             while self.node.spin_once(timeout_sec=0):
                 pass
             t = t_end * 1e-9
