@@ -102,7 +102,10 @@ class GraphCache:
 
     # -- queries ------------------------------------------------------------------------------
     def entities(self, kind: Optional[str] = None) -> list:
-        ents = list(self._entities.values())
+        """A snapshot of the graph's entities (zenoh's liveliness thread adds and removes them
+        while a query iterates: every query reads this copy, taken under the writers' lock)."""
+        with self._cond:
+            ents = list(self._entities.values())
         return ents if kind is None else [e for e in ents if e.kind == kind]
 
     def get_node_names_and_namespaces(self) -> list:
@@ -119,7 +122,7 @@ class GraphCache:
 
     def _names_and_types(self, kinds: tuple, node: Optional[tuple] = None) -> list:
         out: dict = defaultdict(set)
-        for e in self._entities.values():
+        for e in self.entities():
             if e.kind in kinds and (node is None or (e.node_name, e.namespace) == node):
                 out[e.name].add(e.ros_type)
         return sorted((k, sorted(v)) for k, v in out.items())
@@ -145,7 +148,7 @@ class GraphCache:
         return self._names_and_types((CLIENT,), (node_name, namespace))
 
     def _count(self, kind: str, name: str) -> int:
-        return sum(1 for e in self._entities.values() if e.kind == kind and e.name == name)
+        return sum(1 for e in self.entities(kind) if e.name == name)
 
     def count_publishers(self, topic: str) -> int:
         return self._count(PUB, topic)
@@ -168,7 +171,7 @@ class GraphCache:
 
     def service_is_available(self, name: str, dds_type: Optional[str] = None,
                              type_hash: Optional[str] = None) -> bool:
-        for e in self._entities.values():
+        for e in self.entities(SERVICE):
             if e.kind == SERVICE and e.name == name and (dds_type is None or e.dds_type == dds_type) \
                     and (type_hash is None or e.type_hash == type_hash):
                 return True
