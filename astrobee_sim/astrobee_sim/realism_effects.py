@@ -155,17 +155,11 @@ class RealismEffects:
         """Simulation.step with actuation noise, lag and disturbances (same watchdog)."""
         p, c = sim.p, sim.client
         robots = list(sim.robots.items())
-        last, fault, limit = sim.last_command, sim.fault, sim.watchdog_timeout + 1e-9
         bag = sim.bag
         for i in range(n):
-            t, k = sim.time, sim.steps
+            k = sim.steps
+            sim._watchdog()
             for name, r in robots:
-                if t - last[name] > limit:
-                    if not fault[name]:
-                        fault[name] = True
-                        r.wrench_cmd = np.zeros(6)
-                elif fault[name]:
-                    fault[name] = False
                 w = self.wrench(name, r, k)
                 if any(w):
                     p.applyExternalForce(r.id, -1, w[:3], r._com_in_base, p.LINK_FRAME,

@@ -197,18 +197,11 @@ class Simulation:
             return
         p, c = self.p, self.client
         step_sim = p.stepSimulation
-        robots = list(self.robots.items())
-        last, fault, limit = self.last_command, self.fault, self.watchdog_timeout + 1e-9
+        robots = list(self.robots.values())
         bag = self.bag
         for i in range(n):
-            t = self.time
-            for name, r in robots:
-                if t - last[name] > limit:
-                    if not fault[name]:
-                        fault[name] = True
-                        r.wrench_cmd = np.zeros(6)
-                elif fault[name]:
-                    fault[name] = False
+            self._watchdog()
+            for r in robots:
                 r.apply()
             if bag is not None:
                 bag.before_step(self.dt)
@@ -217,6 +210,19 @@ class Simulation:
             self.steps += 1
             if bag is not None:
                 bag.after_step(self.dt, sample=i >= n - 2)
+
+    def _watchdog(self) -> None:
+        """The propulsion watchdog at the current time: a robot with no command for
+        `watchdog_timeout` s has its held wrench zeroed and is faulted until a command comes."""
+        t, last, fault = self.time, self.last_command, self.fault
+        limit = self.watchdog_timeout + 1e-9
+        for name, r in self.robots.items():
+            if t - last[name] > limit:
+                if not fault[name]:
+                    fault[name] = True
+                    r.wrench_cmd = np.zeros(6)
+            elif fault[name]:
+                fault[name] = False
 
     def advance(self, duration: float) -> None:
         self.step(max(1, int(round(duration / self.dt))))
