@@ -1,6 +1,7 @@
 """The Task's verdict of a recorded flight agrees with the mission's summary: mission client +
 planner_node + pd_controller_node + recorder, each its own process, with sim_node on its
-numpy rigid-body backend (lockstep), then the bag read back and judged by astrobee.task."""
+numpy rigid-body backend (lockstep, started paused; the mission hands the leg over once the
+recorder has every sim topic), then the bag read back and judged by astrobee.task."""
 from __future__ import annotations
 
 import json
@@ -49,7 +50,8 @@ def test_task_verdict_of_the_recording_agrees_with_the_mission(tmp_path, toleran
         py = sys.executable
         try:
             for argv in ([py, "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "backend:=rigid",
-                          "-p", "scenario:=lab_hop", "-p", "clock_mode:=lockstep"],
+                          "-p", "scenario:=lab_hop", "-p", "clock_mode:=lockstep",
+                          "-p", "start_paused:=true"],
                          [py, "-m", "astrobee_planning.planner_node"],
                          [py, "-m", "astrobee_control.pd_controller_node", "--ros-args",
                           "-p", "use_sim_time:=true"],
@@ -58,7 +60,10 @@ def test_task_verdict_of_the_recording_agrees_with_the_mission(tmp_path, toleran
                 procs.append(testing.spawn(argv, env, stdout=subprocess.DEVNULL,
                                            stderr=subprocess.DEVNULL))
             mission = subprocess.run([py, "-m", "astrobee_bringup.mission", "--scenario", "lab_hop",
-                                      "--run-dir", str(run), "--timeout", "120"], env=env,
+                                      "--run-dir", str(run), "--timeout", "120",
+                                      # the leg starts once the recorder has every sim topic:
+                                      # the bag holds every sample the mission judged
+                                      "--handover", "--await-recorder"], env=env,
                                      capture_output=True, text=True, timeout=180)
         finally:
             for p in reversed(procs):

@@ -18,6 +18,8 @@ import time
 from roszen.bag.writer import BagWriter
 from roszen.qos import Durability, History, QoSProfile, Reliability
 
+REDISCOVER_PERIOD = 1.0   # s between looks at the graph with no change event (a safety net)
+
 
 def log(text: str) -> None:
     print(f"[INFO] [{time.time():.9f}] [rosbag2_recorder]: {text}", file=sys.stderr, flush=True)
@@ -253,17 +255,23 @@ class Recorder:
 
     def spin(self, stop: threading.Event) -> None:
         """Record until `stop` is set."""
-        self.discover()
+        # cleared before the look, never after: a topic appearing during discover() sets the
+        # event again and is picked up at the next turn (clearing after lost it until the next
+        # graph change: a CI run's recorder missed every sim topic for 89 s)
         self._changed.clear()
+        self.discover()
         log("Recording...")
         if self.topics:
             missing = sorted(self.topics - set(self.subscriptions))
             if missing:
                 log(f"Waiting for topics to appear: {', '.join(missing)}")
+        next_look = time.monotonic() + REDISCOVER_PERIOD
         while not stop.is_set():
             self.node.spin_once(timeout_sec=0.05)
-            if self.discovery and self._changed.is_set():
+            # on every graph change, and once a second besides (a missed event costs a second)
+            if self.discovery and (self._changed.is_set() or time.monotonic() > next_look):
                 self._changed.clear()
+                next_look = time.monotonic() + REDISCOVER_PERIOD
                 self.discover()
             if self.sim is not None:
                 self.sim.check()
