@@ -142,7 +142,7 @@ class AstrobeeCargoEnv(gym.Env):
                                (start, q), (goal, q))
 
     def step(self, action):
-        a = np.clip(np.asarray(action, dtype=float).reshape(6), -1.0, 1.0)
+        a = np.minimum(np.maximum(np.asarray(action, dtype=float).reshape(6), -1.0), 1.0)
         if self.action_mode == "wrench":
             obs, sample = self.flight.step(a * self._limits, mode="replace")
         else:
@@ -161,34 +161,43 @@ class AstrobeeCargoEnv(gym.Env):
 
     # ---- observation ------------------------------------------------------------------------
     def _vector(self, obs: FlightObs) -> np.ndarray:
+        """The observation (OBS_FIELDS, then the bag's points): gathered as floats and clipped
+        to OBS_BOUND (once per step: one list, one array, no per-field arrays)."""
         name = self.flight.names[0]
         r = obs.robots[name]
         st, ref = r.state, r.reference
-        q = st.orientation
+        q = np.asarray(st.orientation, float)
+        pos = np.asarray(st.position, float)
         goal = self.flight.task.goals[name]
-        out = np.zeros(self.observation_space.shape[0], np.float64)
-        parts = [goal.position - st.position, rot.attitude_error(q, goal.orientation),
-                 st.velocity, q, st.omega, ref.position - st.position, ref.velocity,
-                 rot.attitude_error(q, ref.orientation), r.nominal / self._limits_safe]
+        vals = [*(goal.position - pos).tolist(), *rot.attitude_error(q, goal.orientation).tolist(),
+                *_floats(st.velocity), *q.tolist(), *_floats(st.omega),
+                *(ref.position - pos).tolist(), *_floats(ref.velocity),
+                *rot.attitude_error(q, ref.orientation).tolist(),
+                *(r.nominal / self._limits_safe).tolist()]
         bag = obs.bag
         r_wb = rot.to_matrix(q)                       # body -> world, once per tick
-        if bag is not None and bool(np.any(np.asarray(bag.attached, bool))):
-            qb = rot.normalize(np.asarray(bag.orientation, float))
-            parts += [(np.asarray(bag.position) - st.position) @ r_wb,
-                      (np.asarray(bag.velocity) - st.velocity) @ r_wb,
-                      rot.multiply(rot.conjugate(q), qb), [1.0]]
+        if bag is not None and _held(bag.attached):
+            qb = rot.normalize(bag.orientation)
+            vals += [*((np.asarray(bag.position) - pos) @ r_wb).tolist(),
+                     *((np.asarray(bag.velocity) - st.velocity) @ r_wb).tolist(),
+                     *rot.multiply(rot.conjugate(q), qb).tolist(), 1.0]
         else:
-            parts += [np.zeros(3), np.zeros(3), [0.0, 0.0, 0.0, 1.0], [0.0]]
+            vals += [0.0] * 6 + [0.0, 0.0, 0.0, 1.0, 0.0]
         m = self.flight.monitor
-        parts.append([min((m.t - m.t0) / self.flight.task.time_limit, 1.0)])
-        flat = np.concatenate([np.asarray(p, float).ravel() for p in parts])
-        out[:OBS_SIZE] = flat
+        vals.append(min((m.t - m.t0) / self.flight.task.time_limit, 1.0))
         if self.n_nodes:
+            out = np.zeros(self.observation_space.shape[0], np.float64)
+            out[:OBS_SIZE] = vals
             pts = self.flight.sim.bag_points()
             if pts is not None and len(pts) == self.n_nodes:
-                rel = (np.asarray(pts, float) - st.position) @ r_wb     # body frame
+                rel = (np.asarray(pts, float) - pos) @ r_wb     # body frame
                 out[OBS_SIZE:] = rel.ravel()
-        return np.clip(out, -OBS_BOUND, OBS_BOUND).astype(np.float32)
+        else:
+            out = np.array(vals, np.float64)
+            if out.shape != (OBS_SIZE,):
+                raise ValueError(f"observation has {out.size} values, OBS_FIELDS say {OBS_SIZE}")
+        # np.clip's own arithmetic, without its Python-level dispatch
+        return np.minimum(np.maximum(out, -OBS_BOUND, out=out), OBS_BOUND, out=out).astype(np.float32)
 
     # ---- rendering --------------------------------------------------------------------------
     def render(self):
@@ -226,6 +235,18 @@ class AstrobeeCargoEnv(gym.Env):
             self._renderer.close()
             self._renderer = None
         self.flight.close()
+
+
+def _floats(v: Any) -> list[float]:
+    """A 3-vector (array, list or tuple) as a list of floats."""
+    return np.asarray(v, float).ravel().tolist()
+
+
+def _held(attached: Any) -> bool:
+    """Whether any grasp holds the bag (`attached`: a bool or one per robot)."""
+    if isinstance(attached, (list, tuple)):
+        return any(bool(a) for a in attached)
+    return bool(np.any(np.asarray(attached, bool)))
 
 
 def random_start_goal(rng: np.random.Generator, scenario: Scenario,
