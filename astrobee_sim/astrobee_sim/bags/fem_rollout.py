@@ -1,9 +1,11 @@
 """K independent copies of robot + fast FEM bag stepped in one call, for rollouts (no pybullet).
 
 The robot is one rigid body (whole-robot mass and inertia from config/astrobee.yaml, the arm held
-rigid, the gripper a fixed point of the body); the bag is mass_spring's model with the same
-anchor springs, wall-slab and robot-box contacts as fem_fast.FastFemBag. All copies share one
-factored matrix: a step is a few array operations over (N, K, 3) plus one matrix product.
+rigid, the gripper a fixed point of the body) whose collision box (centred on the body frame's
+origin, as in robot.py's URDF) collides with the wall slabs (rigid_walls.BoxWalls); the bag is
+mass_spring's model with the same anchor springs, wall-slab and robot-box contacts as
+fem_fast.FastFemBag. All copies share one factored matrix: a step is a few array operations
+over (N, K, 3) plus one matrix product.
 """
 from __future__ import annotations
 
@@ -12,7 +14,8 @@ import numpy as np
 from astrobee import config
 
 from .mass_spring import Anchors, MassSpring
-from .node_contacts import collide_moving_boxes, collide_static_boxes
+from .node_contacts import collide_moving_boxes, collide_static_boxes, grow_boxes
+from .rigid_walls import BoxWalls
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -28,7 +31,10 @@ class FemRollout:
 
     def __init__(self, springs: MassSpring, anchors: Anchors, grip_offsets: np.ndarray,
                  walls: np.ndarray, box_half: np.ndarray, k: int, dt: float,
-                 margin: float = 0.006, friction: float = 0.5):
+                 margin: float = 0.006, friction: float = 0.5, robot_walls: bool = True,
+                 robot_friction: float = 0.25):
+        """robot_walls False: the robot body passes through the walls (the bag still collides);
+        robot_friction: robot-wall Coulomb friction (Bullet's 0.5 x 0.5 of pybullet's run)."""
         cfg = config.astrobee()
         self.springs, self.anchors = springs, anchors
         self.offsets = np.asarray(grip_offsets, dtype=float)      # (A, 3) body frame, from COM
@@ -36,6 +42,11 @@ class FemRollout:
         self.k, self.dt, self.margin, self.friction = int(k), float(dt), margin, friction
         self.mass = float(cfg["mass"])
         self.inertia = np.asarray(cfg["inertia"], dtype=float)    # diagonal, body frame
+        self.box_offset = -np.asarray(cfg["com_offset"], dtype=float)   # box centre from COM
+        self._walls_grown = grow_boxes(self.walls, margin)
+        self.robot_walls = (BoxWalls(self.walls, self.half, self.box_offset, self.mass,
+                                     self.inertia, 0.0, robot_friction) if robot_walls else None)
+        self.wall_depth = np.zeros(self.k)     # robot into a wall, deepest over the last step()
         n = springs.n
         self.x = np.zeros((n, self.k, 3))
         self.v = np.zeros((n, self.k, 3))
@@ -48,9 +59,9 @@ class FemRollout:
         self.time = 0.0
 
     @classmethod
-    def from_bag(cls, bag, robot, k: int, dt: float) -> "FemRollout":
+    def from_bag(cls, bag, robot, k: int, dt: float, **kw) -> "FemRollout":
         """K copies of a FastFemBag and the robot holding its first handle, in their current
-        state (the robot's velocity and spin included)."""
+        state (the robot's velocity and spin included); kw: the constructor's options."""
         from .fem_fast import quat_matrices
         pos, q, vel, w = robot.state()
         com = robot.com()
@@ -60,7 +71,7 @@ class FemRollout:
         anchors = Anchors(g["nodes"], bag._anchors.stiffness[: len(g["nodes"])],
                           bag._anchors.damping[: len(g["nodes"])])
         ro = cls(bag.springs, anchors, (t - com) @ R, bag.walls, bag.half, k, dt,
-                 bag.margin, bag.friction)
+                 bag.margin, bag.friction, **kw)
         ro.x[...] = bag.x
         ro.v[...] = bag.v
         ro.pos[...] = com
@@ -90,8 +101,10 @@ class FemRollout:
         from .fem_fast import quat_matrices
         h, m, inertia = self.dt, self.mass, self.inertia
         wb = np.broadcast_to(np.asarray(wrench_body, dtype=float), (self.k, 6))
+        self.wall_depth = np.zeros(self.k)
         for _ in range(n):
             R = quat_matrices(self.q)
+            pos_prev, R_prev = self.pos.copy(), R
             f = np.einsum("kij,kj->ki", R, wb[:, :3]) + self.force
             tau = np.einsum("kij,kj->ki", R, wb[:, 3:]) + self.torque
             # rigid robot: semi-implicit Euler, Euler's equations in the body frame
@@ -108,6 +121,9 @@ class FemRollout:
             self.q = _quat_mul(dq, self.q)
             self.q /= np.linalg.norm(self.q, axis=1, keepdims=True)
             R = quat_matrices(self.q)
+            if self.robot_walls is not None:
+                d = self.robot_walls.collide(self.pos, R, self.vel, self.omega, pos_prev, R_prev)
+                np.maximum(self.wall_depth, d, out=self.wall_depth)
             # anchor targets on the (rigid) gripper
             arm = np.einsum("kij,aj->aki", R, self.offsets)            # (A, K, 3)
             target = self.pos[None] + arm
@@ -116,11 +132,14 @@ class FemRollout:
             x_prev = x.copy()
             self.springs.step(x, v, h, self.anchors, target, target_vel)
             collide_static_boxes(x.reshape(-1, 3), v.reshape(-1, 3), x_prev.reshape(-1, 3),
-                                 self.walls, self.margin, self.friction)
-            fc, tc = collide_moving_boxes(x, v, x_prev, self.pos, R, self.vel, self.omega,
+                                 self.walls, self.margin, self.friction, self._walls_grown)
+            # the body box is centred on the body frame's origin, not on the COM
+            box = np.einsum("kij,j->ki", R, self.box_offset)
+            fc, tc = collide_moving_boxes(x, v, x_prev, self.pos + box, R,
+                                          self.vel + np.cross(self.omega, box), self.omega,
                                           self.half, self.margin, self.friction,
                                           self.springs.node_mass, h, self.anchors.nodes)
             fa = self.springs.anchor_forces(x, v, self.anchors, target, target_vel)
             self.force = fa.sum(axis=0) + fc
-            self.torque = np.cross(arm, fa).sum(axis=0) + tc
+            self.torque = np.cross(arm, fa).sum(axis=0) + tc + np.cross(box, fc)
             self.time += h
