@@ -4,9 +4,12 @@ the rigid, constraint and FEM (fast solver) bags, beside the simulator library's
 
 One env step = one 62.5 Hz control tick (5-6 physics steps at 350 Hz) + the PD law + the
 observation + the Task's reward, so the library loop's ticks/s is the ceiling; 62.5 steps/s
-is real time. Residual mode, zero action (the PD flies the Node 2 -> JEM leg).
+is real time. Zero action in residual mode (the PD flies the Node 2 -> JEM leg) or in wrench
+mode (the robot drifts; the PD still runs for the observation). Each figure is the median of
+--repeat runs, wall and per CPU second (time.process_time: the machine is shared and loaded).
 
-    .venv/bin/python bench/gym_bench.py [--steps N]
+    .venv/bin/python bench/gym_bench.py [--steps N] [--repeat R] [--models rigid,constraint]
+                                        [--modes residual,wrench] [--no-async]
 """
 from __future__ import annotations
 
@@ -23,26 +26,28 @@ CASES = [("rigid", None), ("constraint", None), ("fem", "fast")]
 TICK_RATE = 62.5
 
 
-def env_kwargs(model: str, solver: str | None) -> dict:
-    kw = {"scenario": "node2_to_jem_bag", "bag_model": model, "action_mode": "residual"}
+def env_kwargs(model: str, solver: str | None, mode: str = "residual") -> dict:
+    kw = {"scenario": "node2_to_jem_bag", "bag_model": model, "action_mode": mode}
     if solver:
         kw["fem_solver"] = solver
     return kw
 
 
-def single(model: str, solver: str | None, steps: int) -> float:
+def single(model: str, solver: str | None, steps: int, mode: str = "residual"
+           ) -> tuple[float, float]:
+    """(wall, CPU) env steps/s of one env in this process."""
     import gymnasium as gym
     import astrobee_lab  # noqa: F401
-    env = gym.make("AstrobeeCargo-v0", **env_kwargs(model, solver))
+    env = gym.make("AstrobeeCargo-v0", **env_kwargs(model, solver, mode))
     try:
         env.reset(seed=0)
         zero = np.zeros(6, np.float32)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(steps):
             _, _, term, trunc, _ = env.step(zero)
             if term or trunc:
                 env.reset()
-        return steps / (time.perf_counter() - t0)
+        return steps / (time.perf_counter() - t0), steps / (time.process_time() - c0)
     finally:
         env.close()
 
@@ -66,31 +71,49 @@ def vectorised(model: str, solver: str | None, steps: int, workers: int = 2) -> 
         venv.close()
 
 
-def library(model: str, solver: str | None, steps: int) -> float:
+def library(model: str, solver: str | None, steps: int) -> tuple[float, float]:
+    """(wall, CPU) ticks/s of the simulator library's own loop."""
     from sim_rtf import library_rtf
-    wall_rtf, _, _ = library_rtf(model, 0, steps / TICK_RATE, fem_solver=solver)
-    return wall_rtf * TICK_RATE
+    wall_rtf, cpu_rtf, _ = library_rtf(model, 0, steps / TICK_RATE, fem_solver=solver)
+    return wall_rtf * TICK_RATE, cpu_rtf * TICK_RATE
+
+
+def median_pair(runs: list[tuple[float, float]]) -> tuple[float, float]:
+    return float(np.median([r[0] for r in runs])), float(np.median([r[1] for r in runs]))
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=600, help="env steps per measurement")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per figure (the median is shown)")
+    ap.add_argument("--models", default="rigid,constraint,fem",
+                    help="comma-separated bag models (fem runs the fast solver)")
+    ap.add_argument("--modes", default="residual", help="comma-separated action modes")
+    ap.add_argument("--no-async", action="store_true", help="skip the AsyncVectorEnv x2 column")
     a = ap.parse_args()
+    models = a.models.split(",")
+    modes = a.modes.split(",")
     rows = []
-    for model, solver in CASES:
-        lib = library(model, solver, a.steps)
-        one = single(model, solver, a.steps)
-        vec = vectorised(model, solver, a.steps)
-        rows.append((model + (f" ({solver})" if solver else ""), lib, one, vec))
+    for model, solver in [c for c in CASES if c[0] in models]:
+        library(model, solver, 30)       # warm-up: the first loop in a process pays one-time costs
+        lib = median_pair([library(model, solver, a.steps) for _ in range(a.repeat)])
+        for mode in modes:
+            one = median_pair([single(model, solver, a.steps, mode) for _ in range(a.repeat)])
+            vec = (float("nan") if a.no_async or mode != "residual"
+                   else vectorised(model, solver, a.steps))
+            rows.append((model + (f" ({solver})" if solver else ""), mode, lib, one, vec))
     print("\nAstrobeeCargo-v0 steps/s (1 step = one 62.5 Hz tick; 62.5 steps/s = real time), "
-          f"{a.steps} steps, residual mode; 2-core shared machine")
-    print(f"{'bag':<16}{'library ticks/s':>16}{'env single':>12}{'env/library':>12}"
+          f"{a.steps} steps, median of {a.repeat}; wall (per CPU s); 2-core shared machine")
+    print(f"{'bag':<14}{'mode':<10}{'library ticks/s':>20}{'env single':>18}{'env/library':>12}"
           f"{'env async x2':>14}{'x2/single':>10}")
-    for name, lib, one, vec in rows:
-        print(f"{name:<16}{lib:>16.0f}{one:>12.0f}{one / lib:>12.2f}{vec:>14.0f}{vec / one:>10.2f}")
+    for name, mode, (lib, lib_cpu), (one, one_cpu), vec in rows:
+        print(f"{name:<14}{mode:<10}{f'{lib:.0f} ({lib_cpu:.0f})':>20}"
+              f"{f'{one:.0f} ({one_cpu:.0f})':>18}{one / lib:>12.2f}{vec:>14.0f}"
+              f"{vec / one:>10.2f}")
     print("reference: the library loop (bench/sim_rtf.py) is the ceiling of one env; "
           "2 workers on 2 cores can at most double it; pyastrobee's FEM bag runs 0.6x real time "
-          "(~38 ticks/s)")
+          "(~38 ticks/s); before the single-quaternion rotation paths (load 8-10): one env "
+          "rigid 1398-1766, constraint 1144-1646 steps per CPU s (residual)")
     return 0
 
 

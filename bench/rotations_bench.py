@@ -1,0 +1,67 @@
+"""astrobee.rotations per call: one quaternion (the scalar path in floats) vs the same call on a
+batch of one (shape (1, 4): the array path, what one quaternion cost before the scalar paths),
+in CPU microseconds (time.process_time, best of --repeat), and whether both give the same bits.
+
+    .venv/bin/python bench/rotations_bench.py [--calls N] [--repeat R]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from astrobee import rotations as rot
+
+Q = np.array([0.1, -0.2, 0.3, 0.9])
+P = np.array([0.2, 0.1, -0.3, 0.8])
+V = np.array([0.3, -1.0, 2.0])
+# name, the call (given one quaternion or a batch of one)
+CASES = [
+    ("normalize", lambda q, p, v: rot.normalize(q)),
+    ("multiply", lambda q, p, v: rot.multiply(q, p)),
+    ("to_matrix", lambda q, p, v: rot.to_matrix(q)),
+    ("rotate", lambda q, p, v: rot.rotate(q, v)),
+    ("rotate_inverse", lambda q, p, v: rot.rotate_inverse(q, v)),
+    ("to_rotvec", lambda q, p, v: rot.to_rotvec(q)),
+    ("from_rotvec", lambda q, p, v: rot.from_rotvec(v)),
+    ("attitude_error", lambda q, p, v: rot.attitude_error(q, p)),
+]
+
+
+def cpu_us(fn, calls: int, repeat: int) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        c0 = time.process_time()
+        for _ in range(calls):
+            fn()
+        best = min(best, (time.process_time() - c0) / calls * 1e6)
+    return best
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--calls", type=int, default=5000)
+    ap.add_argument("--repeat", type=int, default=5)
+    a = ap.parse_args()
+    q1, p1, v1 = Q[None], P[None], V[None]
+    print(f"{'function':<16}{'one (scalar) us':>17}{'batch of one (array) us':>25}{'speed-up':>10}"
+          f"{'same bits':>11}")
+    for name, f in CASES:
+        one = cpu_us(lambda: f(Q, P, V), a.calls, a.repeat)
+        arr = cpu_us(lambda: f(q1, p1, v1), a.calls, a.repeat)
+        same = np.array_equal(f(Q, P, V), f(q1, p1, v1)[0])
+        print(f"{name:<16}{one:>17.2f}{arr:>25.2f}{arr / one:>9.1f}x{str(same):>11}")
+    for name, f in [("angle_between", lambda: rot.angle_between(Q, P)),
+                    ("slerp", lambda: rot.slerp(Q, P, 0.3)),
+                    ("step_body", lambda: rot.step_body(rot.normalize(Q), V * 0.01))]:
+        print(f"{name:<16}{cpu_us(f, a.calls, a.repeat):>17.2f}{'(no batch form)':>25}")
+    print("reference: before the scalar paths one quaternion took the array path (the right "
+          "column); an AstrobeeCargo-v0 step is ~400 us CPU (bench/gym_bench.py) and calls "
+          "~17 of these")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
