@@ -18,6 +18,27 @@ Every `replan_period` seconds while a segment is being followed:
 
 Attitude follows the nominal segment (the candidates perturb translation only), so all
 candidates share one rotation per rollout step.
+
+Attitude-aware mode (`attitude: true`; the controller study found the translation-only MPC fails
+where PD does: a bump on the bag spins robot + bag, and the flight mode's torque limits, fought
+by the position loop's off-centre force, do not take the spin back before the segment ends).
+With the turning rollout model (robot + bag one rigid body, ReducedModel.turns) each decision
+also varies, per candidate:
+- the attitude reference: `attitude_share` of the candidates get a recovery profile instead of
+  the nominal attitude, q_ref(t) = q_nom(t) exp(delta(t)), delta a quintic (per body axis) from
+  the present attitude offset and offset rate to zero in Tc seconds; Tc is drawn between the
+  shortest recovery whose feed-forward torque I_c delta'' (I_c: the pair's inertia about its
+  centre of mass) stays within `torque_margin` of the flight mode's torque limits and 2.5x it.
+  So the PD tracks a torque-feasible recovery instead of saturating against a step;
+- the translation's progress (time scaling): a candidate follows the nominal at rate s in
+  {1, (1 + time_scale_min)/2, time_scale_min} (0: pause), so the position loop stops asking
+  for the off-centre force that turns the pair while the attitude is being recovered; the
+  segment's delay is booked (at most `max_delay` s: the task allows plan + settle + 10 s) and
+  the rest of the nominal is shifted by it.
+The cost adds, from the rollout's own attitude dynamics: the mean squared attitude error to
+the (time-scaled) nominal attitude (`w_attitude`), the squared angular momentum of the pair
+about its centre at the horizon's end (`w_momentum`) and the delay (`w_delay`, per s). Without a
+bag or with a model that does not turn, the decision is the translation-only one.
 """
 from __future__ import annotations
 
@@ -35,7 +56,8 @@ from .clearance import KeepIn
 from .law import BagObservation
 from .mass import MassProperties
 from .pd import State
-from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStart, rotate_by
+from .reduced_model import (CandidateReferences, Gains, RolloutModel, RolloutStart,
+                            _exp_so3, _log_so3, compound_inertia, rotate_by)
 from .reference import SampledTrajectory
 from .tracking import CONTROLLING, Step, Tracker
 
@@ -62,6 +84,15 @@ class MpcConfig:
     w_relvel: float = 10.0           # per (m/s)^2 of mean squared bag-robot relative speed
     robot_half_size: float = 0.16    # m, half the robot's envelope (its corners are checked)
     seed: int = 0
+    # attitude-aware mode (module docstring): attitude candidates, time scaling, attitude cost
+    attitude: bool = False
+    attitude_share: float = 0.5      # share of candidates with a recovery attitude reference
+    torque_margin: float = 0.7       # recovery feed-forward within this share of torque limits
+    time_scale_min: float = 0.0      # slowest translation progress of a candidate (0: pause)
+    max_delay: float = 8.0           # s the segment may be delayed in all
+    w_attitude: float = 20.0         # per rad^2 of mean squared attitude error to the nominal
+    w_momentum: float = 200.0        # per (N m s)^2 of the pair's angular momentum at the end
+    w_delay: float = 0.5             # per s of translation delay over the horizon
 
     def validate(self) -> "MpcConfig":
         """Raise ValueError (one line) for a value the MPC cannot run with."""
@@ -84,7 +115,13 @@ class MpcConfig:
                                                                  "robot_half_size"):
                 if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                     raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
+        for name, lo, hi in (("attitude_share", 0.0, 1.0), ("torque_margin", 1e-3, 1.0),
+                             ("time_scale_min", 0.0, 1.0), ("max_delay", 0.0, 60.0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}")
         self.samples, self.cost_stride = int(self.samples), int(self.cost_stride)
+        self.attitude = bool(self.attitude)
         return self
 
     @classmethod
@@ -106,6 +143,8 @@ class Decision:
     candidates: np.ndarray       # (N, K, 3) rolled-out robot positions (display)
     chosen: np.ndarray           # (K, 3)
     executed: SampledTrajectory  # chosen candidate, then the rest of the nominal
+    attitude_error: np.ndarray | None = None  # (N,) rad at the horizon's end (attitude mode)
+    delay: np.ndarray | None = None           # (N,) s of translation delay (attitude mode)
 
 
 class MpcLaw:
@@ -129,6 +168,7 @@ class MpcLaw:
         self.last: Decision | None = None
         self._next_replan = 0.0
         self._warm: np.ndarray | None = None   # (6,) previous best [dp, dv]
+        self._delay = 0.0                      # s the translation lags the nominal (attitude mode)
 
     # ---- ControlLaw plumbing: the Tracker's state machine -------------------------------
     @property
@@ -170,6 +210,7 @@ class MpcLaw:
             traj = traj.shifted(now - traj.start_time)
         self.nominal = traj
         self._warm = None
+        self._delay = 0.0
         self._next_replan = now
         self.tracker.follow(traj, now)
 
@@ -185,7 +226,7 @@ class MpcLaw:
         """One control tick: replan when due, then the Tracker's PD step on the chosen plan."""
         decision = None
         if (self.tracker.state == CONTROLLING and self.nominal is not None
-                and now >= self._next_replan and now < self.nominal.end_time):
+                and now >= self._next_replan and now < self.nominal.end_time + self._delay):
             self._next_replan = now + self.config.replan_period
             decision = self.decide(state, now)
             if decision is not None:
@@ -211,6 +252,8 @@ class MpcLaw:
 
     def decide(self, state: State, now: float) -> Decision | None:
         """Sample, roll out, score; None when too little of the segment is left to plan."""
+        if self.config.attitude and self._turns(state):
+            return self._decide_attitude(state, now)
         c, nom = self.config, self.nominal
         t_end = min(now + c.horizon, nom.end_time)
         T = t_end - now
@@ -244,6 +287,123 @@ class MpcLaw:
         executed = self._executed(pts[best], now, T)
         return Decision(now, p1, costs, clearance, best, out.robot_position[:, ::stride],
                         out.robot_position[best, ::stride], executed)
+
+    def _turns(self, state: State) -> bool:
+        """The rollout model integrates robot + bag attitude (attitude mode applies)."""
+        turns = getattr(self.model, "turns", None)
+        return self.bag is not None and turns is not None and bool(turns(self._start(state)))
+
+    def _decide_attitude(self, state: State, now: float) -> Decision | None:
+        """The attitude-aware decision (module docstring): time-scaled translation candidates,
+        recovery attitude references, the attitude and angular-momentum cost."""
+        c, nom = self.config, self.nominal
+        t0n = now - self._delay                              # the nominal's clock now
+        T = min(c.horizon, nom.end_time - t0n)
+        m = int(math.ceil(T / c.rollout_dt)) if T > 0 else 0
+        if m < max(2, c.cost_stride):
+            return None
+        dt_r, n = T / m, c.samples
+        times = now + np.arange(m + 1) * dt_r
+        scales = self._time_scales(n)
+        tau = t0n + scales[:, None] * (times - now)          # (N, m+1) nominal times
+        tau_h = np.minimum(tau[:, -1], nom.end_time)
+        pscale = np.clip((nom.end_time - tau_h) / c.horizon, 0.0, 1.0)
+        dz = self._perturbations(n, 1.0) * pscale[:, None]
+        p_h, v_h, a_h = (_interp(nom.t, x, tau_h) for x in (nom.position, nom.velocity, nom.accel))
+        p1 = p_h + dz[:, :3]
+        v1 = scales[:, None] * v_h + dz[:, 3:]
+        vmax = self.flight_mode.hard_limit_vel
+        speed = np.linalg.norm(v1, axis=1, keepdims=True)
+        v1 = np.where(speed > vmax, v1 * (vmax / np.maximum(speed, 1e-12)), v1)
+        a0 = self.tracker.traj.sample(now).accel if self.tracker.traj is not None else \
+            nom.sample(now).accel
+        pts = control_points(state.position, state.velocity, a0, p1, v1,
+                             scales[:, None] ** 2 * a_h, T)
+        ref_p, ref_v, ref_a = _bezier_states(pts, T, np.arange(m) / m)
+        start = self._start(state)
+        I_c, centre = compound_inertia(start, self.rest_offset if self.rest_offset is not None
+                                       else getattr(self.model.handle, "rest_offset", np.zeros(3)))
+        plan = attitude_candidates(nom, tau, times - now, state, scales, I_c,
+                                   np.asarray(self.flight_mode.max_torque, float), c,
+                                   self.rng, n, centre)
+        ref_p = ref_p + plan.shift[:, :m]
+        ref_v = ref_v + plan.shift_velocity[:, :m]
+        ref_a = ref_a + plan.shift_accel[:, :m]
+        refs = CandidateReferences(ref_p, ref_v, ref_a, plan.rotation[:, :m], dt_r,
+                                   plan.omega[:, :m], plan.alpha[:, :m])
+        out = self.model.rollout(start, refs, Gains.from_flight_mode(self.flight_mode))
+        costs, clearance, att_end = self._score_attitude(out, nom, tau[:, 1:], plan, start,
+                                                         scales, T)
+        best = int(np.argmin(costs))
+        if pscale[best] > 1e-6:
+            self._warm = dz[best] / pscale[best]
+        self._delay += (1.0 - scales[best]) * min(c.replan_period, T)
+        stride = c.cost_stride
+        executed = self._executed_attitude(pts[best], now, T, plan, best, tau_h[best])
+        return Decision(now, p1, costs, clearance, best, out.robot_position[:, ::stride],
+                        out.robot_position[best, ::stride], executed, att_end,
+                        (1.0 - scales) * T)
+
+    def _time_scales(self, n: int) -> np.ndarray:
+        """Per candidate, the rate the translation follows the nominal at (candidates 0 and 1,
+        the nominal and the warm start, at 1); none may push the delay past max_delay."""
+        c = self.config
+        out = np.ones(n)
+        room = c.max_delay - self._delay
+        if n > 2 and room > 1e-6 and c.time_scale_min < 1.0:
+            levels = np.array([1.0, 0.5 * (1.0 + c.time_scale_min), c.time_scale_min])
+            out[2:] = self.rng.choice(levels, n - 2)
+            out = np.maximum(out, 1.0 - room / c.replan_period)
+        return out
+
+    def _score_attitude(self, out, nom: SampledTrajectory, tau: np.ndarray,
+                        plan: "AttitudePlan", start: RolloutStart, scales: np.ndarray,
+                        T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """_score's terms against the time-scaled nominal, plus attitude error, the pair's
+        angular momentum at the end and the delay: (costs, clearance, final attitude error)."""
+        c = self.config
+        costs, clr = self._score(out, nom, tau[0], plan.nominal_rotation[0, 1:], start)
+        # tracking against each candidate's own (time-scaled) nominal instead of candidate 0's
+        p_nom0 = _interp(nom.t, nom.position, tau[0])
+        p_nom = _interp(nom.t, nom.position, tau.ravel()).reshape(tau.shape + (3,))
+        costs = costs + c.w_track * (
+            np.mean(np.sum((out.robot_position - p_nom) ** 2, -1), axis=1)
+            - np.mean(np.sum((out.robot_position - p_nom0) ** 2, -1), axis=1))
+        sl = slice(c.cost_stride - 1, None, c.cost_stride)
+        Rn = plan.nominal_rotation[:, 1:][:, sl]                       # (N, K, 3, 3)
+        Rr = out.rotation[:, sl]
+        e = _log_so3(np.swapaxes(Rn, -1, -2).reshape(-1, 3, 3) @ Rr.reshape(-1, 3, 3))
+        e2 = np.sum(e.reshape(Rn.shape[:2] + (3,)) ** 2, -1)           # (N, K) rad^2
+        L = out.omega[:, -1] @ out.inertia.T                            # body frame, N m s
+        return (costs + c.w_attitude * np.mean(e2, axis=1) + c.w_momentum * np.sum(L * L, -1)
+                + c.w_delay * (1.0 - scales) * T), clr, np.sqrt(e2[:, -1])
+
+    def _executed_attitude(self, points: np.ndarray, now: float, T: float,
+                           plan: "AttitudePlan", best: int, tau_h: float) -> SampledTrajectory:
+        """The chosen candidate (position, its attitude reference) at ~10 Hz, then the rest
+        of the nominal, shifted by the candidate's delay."""
+        nom = self.nominal
+        k = max(2, int(math.ceil(T * 10.0)) + 1)
+        s = np.linspace(0.0, 1.0, k)
+        p, v, a = (x[0] for x in _bezier_states(points[None], T, s))
+        t = now + s * T
+        u = s * (plan.rotation.shape[1] - 1)                            # rollout grid index
+        idx = np.minimum(np.round(u).astype(int), plan.rotation.shape[1] - 1)
+        p = p + plan.shift[best, idx]
+        v = v + plan.shift_velocity[best, idx]
+        a = a + plan.shift_accel[best, idx]
+        q = rot.from_matrix(plan.rotation[best, idx])
+        w = plan.omega[best, idx]
+        al = plan.alpha[best, idx]
+        shift = (now + T) - tau_h
+        tail = nom.t > tau_h + 1e-6
+        return SampledTrajectory(np.concatenate([t, nom.t[tail] + shift]),
+                                 np.concatenate([p, nom.position[tail]]),
+                                 np.concatenate([v, nom.velocity[tail]]),
+                                 np.concatenate([a, nom.accel[tail]]),
+                                 np.concatenate([q, nom.orientation[tail]]),
+                                 np.concatenate([w, nom.omega[tail]]),
+                                 np.concatenate([al, nom.alpha[tail]]))
 
     def _start(self, state: State) -> RolloutStart:
         mass = self.tracker.robot_mass.mass
@@ -310,6 +470,122 @@ class MpcLaw:
                                  np.concatenate([al, nom.alpha[tail]]))
 
 
+@dataclass
+class AttitudePlan:
+    """Per-candidate attitude references on the rollout grid (m+1 points): body -> world
+    rotations, world-frame rate and acceleration; the time-scaled nominal's rotations; each
+    candidate's recovery time (inf: nominal attitude) and peak feed-forward torque (N m)."""
+
+    rotation: np.ndarray          # (N, m+1, 3, 3)
+    omega: np.ndarray             # (N, m+1, 3) rad/s, world
+    alpha: np.ndarray             # (N, m+1, 3) rad/s^2, world
+    nominal_rotation: np.ndarray  # (N, m+1, 3, 3)
+    recovery_time: np.ndarray     # (N,) s
+    peak_torque: np.ndarray       # (N, 3) N m, body axes
+    shift: np.ndarray             # (N, m+1, 3) m, position reference shift (world)
+    shift_velocity: np.ndarray    # (N, m+1, 3)
+    shift_accel: np.ndarray       # (N, m+1, 3)
+
+
+RECOVERY_TIMES = np.geomspace(0.5, 40.0, 24)   # s, the recovery durations tried
+
+
+def recovery_profile(e0: np.ndarray, r0: np.ndarray, Tc: np.ndarray, t: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quintic offset delta(t) (and its first two derivatives) from (e0, r0, 0) at t = 0 to
+    rest at zero at t = Tc, zero after; e0, r0 (3,), Tc (N,), t (M,) -> (N, M, 3) each."""
+    Tc = np.asarray(Tc, float)[:, None]
+    u = np.clip(t[None, :] / Tc, 0.0, 1.0)[..., None]          # (N, M, 1)
+    inside = (t[None, :] < Tc)[..., None]
+    T = Tc[..., None]
+    h0 = 1 - 10 * u ** 3 + 15 * u ** 4 - 6 * u ** 5
+    h1 = u - 6 * u ** 3 + 8 * u ** 4 - 3 * u ** 5
+    d0 = -30 * u ** 2 + 60 * u ** 3 - 30 * u ** 4
+    d1 = 1 - 18 * u ** 2 + 32 * u ** 3 - 15 * u ** 4
+    dd0 = -60 * u + 180 * u ** 2 - 120 * u ** 3
+    dd1 = -36 * u + 96 * u ** 2 - 60 * u ** 3
+    x = e0 * h0 + r0 * T * h1
+    v = (e0 * d0 + r0 * T * d1) / T * inside
+    a = (e0 * dd0 + r0 * T * dd1) / (T * T) * inside
+    return x, v, a
+
+
+def shortest_recovery(e0: np.ndarray, r0: np.ndarray, inertia: np.ndarray,
+                      max_torque: np.ndarray, margin: float) -> float:
+    """The shortest of RECOVERY_TIMES whose feed-forward torque I delta'' stays within
+    margin x the torque limits on every body axis (the longest when none does)."""
+    t = np.linspace(0.0, 1.0, 21)
+    ok = []
+    for Tc in RECOVERY_TIMES:
+        _, _, a = recovery_profile(e0, r0, np.array([Tc]), t * Tc)
+        tq = np.abs(a[0] @ np.asarray(inertia).T).max(axis=0)
+        ok.append(bool(np.all(tq <= margin * max_torque + 1e-12)))
+    return float(RECOVERY_TIMES[ok.index(True)] if any(ok) else RECOVERY_TIMES[-1])
+
+
+def attitude_candidates(nom: SampledTrajectory, tau: np.ndarray, t: np.ndarray, state: State,
+                        scales: np.ndarray, inertia: np.ndarray, max_torque: np.ndarray,
+                        config: MpcConfig, rng: np.random.Generator, n: int,
+                        centre: np.ndarray | None = None) -> AttitudePlan:
+    """The candidates' attitude references (AttitudePlan) on the rollout grid: the time-scaled
+    nominal's attitude for the first ones (candidate 0 is the nominal), and for the last
+    `attitude_share` (the warm start, candidate 1, among them) a torque-feasible recovery
+    from the present attitude offset and rate (recovery_profile, shortest_recovery). A
+    recovery candidate's position reference is shifted by (R_nom - R_ref) c (c: robot ->
+    pair's centre of mass, body; `centre`): the pair turns about its centre of mass, where the
+    position loop does not fight the turn with an off-centre force (blended in from zero at
+    the start, where the candidate leaves from the robot's present position)."""
+    q_nom = np.stack([np.interp(tau.ravel(), nom.t, nom.orientation[:, k]) for k in range(4)], -1)
+    Rn = rot.to_matrix(q_nom / np.linalg.norm(q_nom, axis=-1, keepdims=True)).reshape(
+        tau.shape + (3, 3))
+    w_nom = _interp(nom.t, nom.omega, tau.ravel()).reshape(tau.shape + (3,)) * scales[:, None, None]
+    a_nom = _interp(nom.t, nom.alpha, tau.ravel()).reshape(tau.shape + (3,)) * \
+        (scales ** 2)[:, None, None]
+    R_now = rot.to_matrix(np.asarray(state.orientation, float))
+    R0 = Rn[0, 0]
+    e0 = _log_so3((R0.T @ R_now)[None])[0]                     # R_now = R0 exp(e0)
+    r0 = np.asarray(state.omega, float) - R_now.T @ w_nom[0, 0]
+    k = int(round(config.attitude_share * n))
+    first = max(2, n - k) if k > 0 else n
+    Tc = np.full(n, np.inf)
+    peak = np.zeros((n, 3))
+    rotation, omega, alpha = Rn.copy(), w_nom.copy(), a_nom.copy()
+    if first < n:
+        T0 = shortest_recovery(e0, r0, inertia, max_torque, config.torque_margin)
+        Tc[first:] = T0 * rng.uniform(1.0, 2.5, n - first)
+        Tc[first] = T0
+        Tc[1] = T0 * 1.25
+        sel = np.r_[1, np.arange(first, n)]
+        x, v, a = recovery_profile(e0, r0, Tc[sel], t)
+        grid = np.linspace(0.0, 1.0, 21)
+        for j, i in enumerate(sel):
+            _, _, ap = recovery_profile(e0, r0, Tc[i:i + 1], grid * Tc[i])
+            peak[i] = np.abs(ap[0] @ np.asarray(inertia).T).max(axis=0)
+        E = _exp_so3(x.reshape(-1, 3)).reshape(x.shape + (3,))
+        rotation[sel] = Rn[sel] @ E
+        omega[sel] = w_nom[sel] + np.einsum("nmij,nmj->nmi", rotation[sel], v)
+        alpha[sel] = a_nom[sel] + np.einsum("nmij,nmj->nmi", rotation[sel], a)
+    shift = np.zeros(tau.shape + (3,))
+    if centre is not None and first < n:
+        c = np.asarray(centre, float)
+        shift = (Rn - rotation) @ c                                  # (N, m+1, 3)
+        u = t / max(float(t[-1]), 1e-9)
+        fade = (1 - 10 * u ** 3 + 15 * u ** 4 - 6 * u ** 5)[None, :, None]
+        shift = shift - shift[:, :1] * fade
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+    sv = np.gradient(shift, dt, axis=1)
+    return AttitudePlan(rotation, omega, alpha, Rn, Tc, peak, shift, sv,
+                        np.gradient(sv, dt, axis=1))
+
+
+def _interp(t: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Per-axis linear interpolation of (T, k) samples at times `at` (...,) -> (..., k),
+    clamped at the ends."""
+    at = np.asarray(at, float)
+    return np.stack([np.interp(at.ravel(), t, values[:, k]) for k in range(values.shape[1])],
+                    -1).reshape(at.shape + (values.shape[1],))
+
+
 def _bezier_states(points: np.ndarray, T: float, s: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities, accelerations (N, M, 3) of quintic Beziers (N, 6, 3) of duration
@@ -334,7 +610,9 @@ _CFG = asdict(MpcConfig())
 PARAMETERS = {**{k: _CFG[k] for k in ("samples", "horizon", "replan_period", "rollout_dt",
                                       "sigma_position", "sigma_velocity", "w_track", "w_collision",
                                       "w_clearance", "clearance_margin", "w_effort", "w_relvel",
-                                      "seed")},
+                                      "seed", "attitude", "attitude_share", "torque_margin",
+                                      "time_scale_min", "max_delay", "w_attitude", "w_momentum",
+                                      "w_delay")},
               "model": "reduced", "handle": "fem", "pybullet_bag": "constraint", "workers": 2,
               "settle_time": 5.0}
 

@@ -3,7 +3,8 @@
 Parameters beyond every controller's: samples, horizon, replan_period, model (reduced |
 pybullet), handle (the identified bag model whose handle model A starts with; the observed bag
 model's is used once a bag is seen), pybullet_bag (constraint | rigid), workers, settle_time,
-seed and the cost weights (mpc.MpcConfig).
+seed and the cost weights (mpc.MpcConfig); the attitude-aware mode: attitude (false), and with
+it attitude_share, torque_margin, time_scale_min, max_delay, w_attitude, w_momentum, w_delay.
 """
 from __future__ import annotations
 

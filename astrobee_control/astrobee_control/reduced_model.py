@@ -178,13 +178,17 @@ class RolloutStart:
 @dataclass
 class CandidateReferences:
     """N candidate references on a common grid of M steps of dt seconds (world frame);
-    `rotation` (M, 3, 3) is the robot's body -> world rotation at each step (shared)."""
+    `rotation` (M, 3, 3) is the robot's body -> world rotation at each step (shared), or
+    (N, M, 3, 3) one per candidate (the turning model only: ReducedModel.turns), with `omega`
+    (N, M, 3) the candidates' world-frame reference rates (None: zero)."""
 
     position: np.ndarray   # (N, M, 3)
     velocity: np.ndarray   # (N, M, 3)
     accel: np.ndarray      # (N, M, 3)
-    rotation: np.ndarray   # (M, 3, 3)
+    rotation: np.ndarray   # (M, 3, 3) or (N, M, 3, 3)
     dt: float
+    omega: np.ndarray | None = None   # (N, M, 3) rad/s, world frame
+    alpha: np.ndarray | None = None   # (N, M, 3) rad/s^2, world frame (feed-forward)
 
 
 @dataclass
@@ -217,6 +221,9 @@ class Rollouts:
     bag_turn: np.ndarray | None = None  # (N, M, 3) the robot's (and rigidly held bag's)
                                         # rotation since the start: rotation vector in the
                                         # start's body frame; None: attitude follows the reference
+    rotation: np.ndarray | None = None  # (N, M, 3, 3) the robot's body -> world rotation
+    omega: np.ndarray | None = None     # (N, M, 3) rad/s, its body-frame rate
+    inertia: np.ndarray | None = None   # (3, 3) robot + bag about their centre of mass, body
 
 
 class RolloutModel(Protocol):
@@ -237,6 +244,10 @@ class ReducedModel:
                  handles: "dict[str, HandleParams | PendulumParams] | None" = None) -> None:
         self.handle = handle
         self.handles = dict(handles or {})
+
+    def turns(self, start: RolloutStart) -> bool:
+        """True when this rollout integrates the attitude (per-candidate rotations allowed)."""
+        return isinstance(self.handle, RigidBodyParams) and start.carrying
 
     def select_bag(self, bag_model: str) -> None:
         """Use the identified handle of `bag_model` when there is one."""
@@ -363,7 +374,6 @@ class ReducedModel:
         robot's centre, off the compound's centre of mass, so it turns the pair; the PD law's
         attitude part (clipped to the small torque limits) turns it back. The body-frame force
         limits then rotate with the robot. Per candidate: rotation (N, 3, 3), rate (N, 3)."""
-        from .mass import box_inertia, robot as robot_mass
         n, m = refs.position.shape[:2]
         dt = float(refs.dt)
         kp, kd = np.asarray(gains.kp, float), np.asarray(gains.kd, float)
@@ -374,14 +384,12 @@ class ReducedModel:
         mt = m_r + m_b
         d = self.handle.rest_offset if start.rest_offset is None else \
             np.asarray(start.rest_offset, float)
-        c = (m_b / mt) * d                                   # compound centre, body frame
-        Rb = np.asarray(start.bag_rotation, float)
-        I_r = robot_mass().inertia if start.robot_inertia is None else start.robot_inertia
-        I_c = (np.asarray(I_r, float) + Rb @ box_inertia(m_b, start.bag_size) @ Rb.T
-               + (m_r * m_b / mt) * (d @ d * np.eye(3) - np.outer(d, d)))
+        I_c, c = compound_inertia(start, d)
         I_inv = np.linalg.inv(I_c)
         I_ff = I_c if start.ff_inertia is None else np.asarray(start.ff_inertia, float)
-        R = np.broadcast_to(refs.rotation[0] if start.robot_orientation is None else
+        per_candidate = refs.rotation.ndim == 4
+        R_ref0 = refs.rotation[:, 0] if per_candidate else refs.rotation[0]
+        R = np.broadcast_to(R_ref0 if start.robot_orientation is None else
                             _quat_matrix(start.robot_orientation), (n, 3, 3)).copy()
         w = np.broadcast_to(np.zeros(3) if start.robot_omega is None else
                             np.asarray(start.robot_omega, float), (n, 3)).copy()
@@ -412,8 +420,14 @@ class ReducedModel:
             if i % sub == sub - 1 or i == m - 1:
                 # attitude step: the PD law's torque (clipped) and the force's torque about the
                 # compound centre (the force averaged over the step), semi-implicit Euler
-                e = _log_so3(R.transpose(0, 2, 1) @ refs.rotation[i])
-                tq = np.clip((akp * e - akd * w) @ I_ff.T, -tmax, tmax)
+                Rref = refs.rotation[:, i] if per_candidate else refs.rotation[i]
+                e = _log_so3(R.transpose(0, 2, 1) @ Rref)
+                e_w = -w if refs.omega is None else \
+                    (R.transpose(0, 2, 1) @ refs.omega[:, i, :, None])[:, :, 0] - w
+                al = akp * e + akd * e_w
+                if refs.alpha is not None:
+                    al = al + (R.transpose(0, 2, 1) @ refs.alpha[:, i, :, None])[:, :, 0]
+                tq = np.clip(al @ I_ff.T, -tmax, tmax)
                 w = w + dta * ((tq - np.cross(c, fsum / (i % sub + 1))) @ I_inv.T)
                 R = R @ _exp_so3(dta * w)
                 fsum[:] = 0.0
@@ -429,7 +443,22 @@ class ReducedModel:
         vel_b = (Rk @ np.cross(Wk, dc)[..., None])[..., 0]
         turn = np.repeat(_log_so3((R0T @ Rs[:, :n_att]).reshape(-1, 3, 3)).reshape(n, n_att, 3),
                          sub, axis=1)[:, :m]
-        return Rollouts(out_X + arm_r, out_V + vel_r, out_X + arm_b, out_V + vel_b, out_f, turn)
+        return Rollouts(out_X + arm_r, out_V + vel_r, out_X + arm_b, out_V + vel_b, out_f, turn,
+                        Rk, Wk, I_c)
+
+
+def compound_inertia(start: RolloutStart, rest_offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(inertia (3, 3) of robot + rigidly held bag about their centre of mass, that centre
+    (3,)), both in the robot's body frame, the bag's centre at `rest_offset`."""
+    from .mass import box_inertia, robot as robot_mass
+    m_r, m_b = float(start.robot_mass), float(start.bag_mass)
+    mt = m_r + m_b
+    d = np.asarray(rest_offset, float)
+    Rb = np.asarray(start.bag_rotation, float)
+    I_r = robot_mass().inertia if start.robot_inertia is None else start.robot_inertia
+    I_c = (np.asarray(I_r, float) + Rb @ box_inertia(m_b, start.bag_size) @ Rb.T
+           + (m_r * m_b / mt) * (d @ d * np.eye(3) - np.outer(d, d)))
+    return I_c, (m_b / mt) * d
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
