@@ -196,8 +196,9 @@ class AstrobeeCargoEnv(gym.Env):
             out = np.array(vals, np.float64)
             if out.shape != (OBS_SIZE,):
                 raise ValueError(f"observation has {out.size} values, OBS_FIELDS say {OBS_SIZE}")
-        # np.clip's own arithmetic, without its Python-level dispatch
-        return np.minimum(np.maximum(out, -OBS_BOUND, out=out), OBS_BOUND, out=out).astype(np.float32)
+        # np.clip's arithmetic without its Python-level dispatch
+        np.maximum(out, -OBS_BOUND, out=out)
+        return np.minimum(out, OBS_BOUND, out=out).astype(np.float32)
 
     # ---- rendering --------------------------------------------------------------------------
     def render(self):
