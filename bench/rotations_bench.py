@@ -1,8 +1,10 @@
 """astrobee.rotations per call: one quaternion (the scalar path in floats) vs the same call on a
 batch of one (shape (1, 4): the array path, what one quaternion cost before the scalar paths),
-in CPU microseconds (time.process_time, best of --repeat), and whether both give the same bits.
+in CPU microseconds (time.process_time, best of --repeat), and whether both give the same bits;
+then the sim's numpy rigid backend (tests' backend: rotate, cross, step_body at 350 Hz), which
+is made of such calls, in ticks per CPU second.
 
-    .venv/bin/python bench/rotations_bench.py [--calls N] [--repeat R]
+    .venv/bin/python bench/rotations_bench.py [--calls N] [--repeat R] [--ticks T]
 """
 from __future__ import annotations
 
@@ -40,10 +42,30 @@ def cpu_us(fn, calls: int, repeat: int) -> float:
     return best
 
 
+def rigid_backend(ticks: int) -> float:
+    """Ticks (6 physics steps each) per CPU s of the rigid backend with the bag, random wrenches."""
+    from astrobee_sim.backend import make_backend
+    sim = make_backend("rigid", "node2_to_jem_bag")
+    try:
+        rng = np.random.default_rng(1)
+        scale = np.array([0.5, 0.5, 0.5, 0.05, 0.05, 0.05])
+        c0 = time.process_time()
+        for _ in range(ticks):
+            sim.command(rng.uniform(-1, 1, 6) * scale)
+            sim.step(6)
+            sim.robot_state()
+            sim.bag_state()
+            sim.clearance()
+        return ticks / (time.process_time() - c0)
+    finally:
+        sim.close()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--calls", type=int, default=5000)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--ticks", type=int, default=2000, help="rigid backend ticks (0: skip)")
     a = ap.parse_args()
     q1, p1, v1 = Q[None], P[None], V[None]
     print(f"{'function':<16}{'one (scalar) us':>17}{'batch of one (array) us':>25}{'speed-up':>10}"
@@ -60,6 +82,10 @@ def main() -> int:
     print("reference: before the scalar paths one quaternion took the array path (the right "
           "column); an AstrobeeCargo-v0 step is ~400 us CPU (bench/gym_bench.py) and calls "
           "~17 of these")
+    if a.ticks:
+        print(f"\nrigid backend, node2_to_jem_bag, {a.ticks} ticks: "
+              f"{rigid_backend(a.ticks):.0f} ticks per CPU s (reference: 1350-1440 with the array path, "
+              "same loop, load 4-6)")
     return 0
 
 
