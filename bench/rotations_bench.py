@@ -84,8 +84,8 @@ def main() -> int:
           "~17 of these")
     if a.ticks:
         print(f"\nrigid backend, node2_to_jem_bag, {a.ticks} ticks: "
-              f"{rigid_backend(a.ticks):.0f} ticks per CPU s (reference: 1350-1440 with the array path, "
-              "same loop, load 4-6)")
+              f"{rigid_backend(a.ticks):.0f} ticks per CPU s (reference: 1350-1440 with the "
+              "array path, same loop, load 4-6)")
     return 0
 
 
