@@ -17,6 +17,8 @@ models, MPC in the loop with the FEM bag >= 1x.
 
     .venv/bin/python bench/sim_rtf.py            # --quick (default): a few simulated seconds
     .venv/bin/python bench/sim_rtf.py --full     # longer runs, the 1500-node graph row
+    .venv/bin/python bench/sim_rtf.py --node-fast 5   # rigid/constraint through sim_node, fast
+                                                      # clock, with and without a recorder
 """
 from __future__ import annotations
 
@@ -100,13 +102,19 @@ def library_rtf(model: str, res: int, seconds: float, fem_solver: str | None = N
 
 
 def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep",
-             fem_solver: str = "") -> tuple[float, float]:
+             fem_solver: str = "", record: bool = False) -> tuple[float, float]:
     """sim_node with this process closing the loop over the ROS 2 wire: in lockstep (the sim
     waits for each tick's command: the round trip counts) or fast (no waiting: the sim's own
-    throughput with every topic published; commands then arrive a few ticks late)."""
+    throughput with every topic published; commands then arrive a few ticks late).
+
+    record: a bag recorder (`astrobee bag record -a`) subscribed to every topic as in a launch
+    (the sim starts paused and runs once the recorder has subscribed: every topic then has a
+    subscriber and costs its whole send)."""
+    import subprocess
+    import tempfile
     import roszen
     from roszen import testing
-    with testing.router() as port:
+    with testing.router() as port, tempfile.TemporaryDirectory(prefix="sim_rtf_rec_") as tmp:
         env = testing.zenoh_env(port)
         args = ["-m", "astrobee_sim.sim_node", "--ros-args", "-p", "scenario:=node2_to_jem_bag",
                 "-p", f"bag_model:={model}", "-p", f"clock_mode:={mode}",
@@ -115,6 +123,12 @@ def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep",
             args += ["-p", f"bag_resolution:={res}"]
         if fem_solver:
             args += ["-p", f"fem_solver:={fem_solver}"]
+        rec = None
+        if record:
+            args += ["-p", "start_paused:=true"]
+            rec = testing.spawn(testing.python_cmd("-m", "astrobee_bringup.cli", "bag", "record", "-a",
+                                                   "-o", f"{tmp}/bag"), env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         proc = testing.spawn(testing.python_cmd(*args), env)
         ctx = roszen.Context(env=env)
         node = roszen.Node("sim_rtf_bench", context=ctx)
@@ -151,9 +165,20 @@ def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep",
                     marks["c1"] = cpu_seconds(proc.pid)
 
             node.create_subscription("astrobee_msgs/msg/EkfState", "/gnc/ekf", on_ekf, 50)
+            if record and not _start_recorded(node, proc):
+                return float("nan"), float("nan")
             end = time.monotonic() + 20 + 5 * seconds
             while marks.get("t1", 0.0) < seconds + 0.5 and time.monotonic() < end and proc.poll() is None:
                 node.spin_once(timeout_sec=0.05)
+            if mode == "fast":
+                # the sim's own figures (it logs them at max_sim_time): here a controller slower
+                # than the sim receives its states late and in bursts, so their arrival times
+                # do not time the sim
+                while proc.poll() is None and time.monotonic() < end:
+                    node.spin_once(timeout_sec=0.05)
+                own = _own_rate(proc)
+                if own is not None:
+                    return own
             if "t0" not in marks or marks["t1"] <= marks["t0"]:
                 return float("nan"), float("nan")
             dt = marks["t1"] - marks["t0"]
@@ -162,6 +187,52 @@ def node_rtf(model: str, res: int, seconds: float, mode: str = "lockstep",
             node.destroy_node()
             ctx.shutdown()
             testing.stop(proc)
+            if rec is not None:
+                testing.stop(rec)
+
+
+def _own_rate(proc) -> tuple[float, float] | None:
+    """(wall, CPU) real-time factor from sim_node's max_sim_time log line, None if absent."""
+    import re
+    if proc.poll() is None:
+        return None
+    try:
+        err = proc.stderr.read()
+    except (OSError, ValueError):
+        return None
+    m = re.search(r"max_sim_time .* reached: .*\(([0-9.]+)x real time\), .*\(([0-9.]+)x per CPU s\)", err)
+    return (float(m.group(1)), float(m.group(2))) if m else None
+
+
+RECORDED = ("/clock", "/loc/truth/pose", "/loc/truth/twist", "/gnc/ekf", "/tf", "/sim/bag/state",
+            "/sim/contacts")
+
+
+def _start_recorded(node, proc, timeout: float = 60.0) -> bool:
+    """Wait for the recorder's subscriptions to the per-tick topics, then reset and resume the
+    paused sim (False if that did not happen in time)."""
+    from astrobee import msgconv as mc
+    import roszen
+    end = time.monotonic() + timeout
+    while any(node.count_subscribers(t) < (2 if t == "/gnc/ekf" else 1) for t in RECORDED):
+        if time.monotonic() > end or proc.poll() is not None:
+            return False
+        node.spin_once(timeout_sec=0.05)
+    for srv, name, fields in (("astrobee_msgs/srv/Reset", mc.SIM_RESET, {}),
+                              ("astrobee_msgs/srv/SimControl", mc.SIM_CONTROL,
+                               {"command": mc.SimControl.RESUME})):
+        cli = node.create_client(srv, name)
+        if not cli.wait_for_service(timeout_sec=max(0.1, end - time.monotonic())):
+            return False
+        req = roszen.request_class(srv)()
+        for k, v in fields.items():
+            setattr(req, k, v)
+        fut = cli.call_async(req)
+        while not fut.done() and time.monotonic() < end:
+            node.spin_once(timeout_sec=0.02)
+        if not fut.done() or not fut.result().success:
+            return False
+    return True
 
 
 def graph_rtf(controller: str, res: int, solver: str, timeout: float = 900.0) -> tuple[float, str]:
@@ -202,13 +273,46 @@ def batched_rtf(res: int, k: int, seconds: float) -> tuple[float, int]:
         sim.close()
 
 
+# issue 12: the reduced models through sim_node in fast clock mode with a controller in the loop,
+# before the per-tick overhead cut (README: wall x real time, the ranges of several runs)
+NODE_FAST_BEFORE = {"rigid": "24-40x", "constraint": "21-30x"}
+
+
+def node_fast_table(runs: int, seconds: float) -> None:
+    """The reduced models through sim_node, fast clock, this process as the PD controller, with
+    and without a bag recorder: each run's wall and per-CPU-second real-time factor, the load."""
+    import os
+    print(f"\nsim_node, fast clock, PD controller over the wire, {seconds:g} sim s a run "
+          f"(target 50x; before the overhead cut: rigid {NODE_FAST_BEFORE['rigid']}, "
+          f"constraint {NODE_FAST_BEFORE['constraint']} wall)")
+    print(f"{'model':<11}{'recorder':>9}{'wall':>8}{'cpu':>8}{'load':>7}")
+    for model in ("rigid", "constraint"):
+        for record in (False, True):
+            walls, cpus = [], []
+            for _ in range(runs):
+                load = os.getloadavg()[0]
+                w, c = node_rtf(model, 0, seconds, "fast", record=record)
+                walls.append(w)
+                cpus.append(c)
+                print(f"{model:<11}{'yes' if record else 'no':>9}{w:>7.1f}x{c:>7.1f}x{load:>7.1f}",
+                      flush=True)
+            print(f"{model:<11}{'yes' if record else 'no':>9}{np.nanmedian(walls):>7.1f}x"
+                  f"{np.nanmedian(cpus):>7.1f}x  median of {runs}; target 50x", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", default=True)
     ap.add_argument("--full", action="store_true")
     ap.add_argument("--no-node", action="store_true", help="skip the sim_node (process) columns")
     ap.add_argument("--no-graph", action="store_true", help="skip the whole-graph rows")
+    ap.add_argument("--node-fast", type=int, default=0, metavar="RUNS",
+                    help="only the reduced models through sim_node in fast clock mode, RUNS runs "
+                         "each with and without a recorder")
     a = ap.parse_args()
+    if a.node_fast:
+        node_fast_table(a.node_fast, 30.0)
+        return
     secs = {("fem", 400): 3.0, ("fem", 1500): 1.5}
     scale = 5.0 if a.full else 1.0
     rows = []

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import os
+import struct
 import sys
 import time
 from dataclasses import dataclass
@@ -59,7 +60,7 @@ from astrobee import scenario as scn  # noqa: E402
 from astrobee.realism import Disturbance, Realism  # noqa: E402
 from astrobee.scenario import Scenario, ScenarioError  # noqa: E402
 
-from . import markers  # noqa: E402
+from . import markers, tick_wire  # noqa: E402
 from .backend import BACKENDS, SimBackend, make_backend  # noqa: E402
 from .robot import qrot  # noqa: E402
 from .simulation import sim_defaults  # noqa: E402
@@ -75,6 +76,15 @@ REALISM_SCALARS = ("ekf_position_noise", "ekf_attitude_noise", "ekf_velocity_noi
                    "ekf_omega_noise", "ekf_position_bias", "ekf_attitude_bias", "actuation_noise",
                    "propulsion_lag", "bag_mass_told", "bag_stiffness_scale", "bag_damping_scale")
 DISTURBANCE_PARAMS = ("time", "target", "force", "magnitude", "duration", "robot")
+# the numbers of the per-tick messages that change (tick_wire templates), in wire order
+_POSE_FIELDS = tick_wire.stamp_fields() + tick_wire.pose_fields("pose")
+_TWIST_FIELDS = (tick_wire.stamp_fields() + tick_wire.vec_fields("twist.linear")
+                 + tick_wire.vec_fields("twist.angular"))
+_EKF_FIELDS = (tick_wire.stamp_fields() + tick_wire.pose_fields("pose")
+               + tick_wire.vec_fields("velocity") + tick_wire.vec_fields("omega"))
+_BAG_FIELDS = (tick_wire.stamp_fields() + tick_wire.pose_fields("pose") + tick_wire.vec_fields("velocity")
+               + tick_wire.vec_fields("omega") + [("deformation", "d")])
+_CONTACTS_FIELDS = tick_wire.stamp_fields() + [("robot_clearance", "d"), ("bag_clearance", "d")]
 
 
 class ParameterError(ValueError):
@@ -246,6 +256,31 @@ def _read_realism(par: Any) -> tuple[str, tuple, Disturbance | None]:
     return preset, tuple(overrides), dist
 
 
+_CMD_HEAD = struct.Struct("<iiI")          # stamp sec, nanosec (read unsigned below), frame_id length
+_CMD_WRENCH = struct.Struct("<6d")
+_CMD_TAIL = 205     # bytes of a FamCommand from its wrench on (accel ... control_mode), CDR aligned
+
+
+def decode_command(data: bytes) -> tuple[int, tuple] | None:
+    """(stamp ns, body wrench) of a FamCommand in little-endian CDR, read at its fixed offsets
+    (~1 us instead of ~10 us for the whole message), or None when the bytes are not that plain
+    layout with a valid frame_id (the caller then decodes the whole message, which raises for
+    malformed bytes as before)."""
+    if len(data) < 16 + _CMD_TAIL or data[:4] != b"\x00\x01\x00\x00":
+        return None
+    sec, _, n = _CMD_HEAD.unpack_from(data, 4)
+    end = 16 + n                                   # after the frame_id's bytes and its NUL
+    off = 4 + ((end - 4 + 7) & ~7)                 # the wrench: 8-aligned after the 4-byte header
+    if n < 1 or len(data) != off + _CMD_TAIL or data[end - 1] != 0:
+        return None
+    try:
+        data[16:end - 1].decode()
+    except UnicodeDecodeError:
+        return None
+    nsec = int.from_bytes(data[8:12], "little")
+    return sec * 1_000_000_000 + nsec, _CMD_WRENCH.unpack_from(data, off)
+
+
 def _short(text: str) -> str:
     return text if len(text) <= MAX_REPLY else text[:MAX_REPLY] + "..."
 
@@ -301,6 +336,9 @@ class SimNode:
                                               M("geometry_msgs/msg/Point"))
         self._marker_cdr = roszen.codec.msg_support("visualization_msgs/msg/Marker").serialize
         self._realism_applied = -1      # pulses in the last /sim/realism
+        self._command_support = roszen.codec.msg_support("astrobee_msgs/msg/FamCommand")
+        self._templates: dict = {}      # per-tick message layouts -> tick_wire.Template | None
+        self._template_fields: dict = {}
         self._ekf_state = getattr(backend, "ekf_state", backend.robot_state)
         self.robot_io: dict[str, dict] = {}
         self._make_robot_io()
@@ -346,7 +384,8 @@ class SimNode:
                 "cmd_stamp": -1, "raw_stamp": -1, "fault_state": None, "topic": t(mc.COMMAND),
             }
             n.create_subscription("astrobee_msgs/msg/FamCommand", t(mc.COMMAND),
-                                  lambda msg, nm=name: self._on_command(nm, msg), 10)
+                                  lambda data, nm=name: self._on_command_cdr(nm, data), 10,
+                                  raw=True)
             n.create_service("astrobee_msgs/srv/SetFlightMode", t(mc.SET_FLIGHT_MODE),
                              lambda req, nm=name: self._on_set_mode(req, nm))
             self.robot_io[name] = io
@@ -358,14 +397,34 @@ class SimNode:
             self._warned[key] = now
             self.log.warn(text)
 
+    def _on_command_cdr(self, name: str, data: bytes) -> None:
+        """A FamCommand's CDR bytes: the stamp and wrench read in place when the layout is the
+        plain one (little-endian, exact length), else the whole message decoded."""
+        cmd = decode_command(data)
+        if cmd is not None:
+            self._command(name, *cmd)
+            return
+        try:
+            msg = self._command_support.deserialize(data)
+        except Exception as exc:  # noqa: BLE001 - as the subscription would: drop and say so
+            self.log.error(f"dropped a sample on {self.robot_io[name]['topic']}: malformed CDR "
+                           f"payload ({len(data)} bytes) for astrobee_msgs/msg/FamCommand: {exc}")
+            return
+        self._on_command(name, msg)
+
     def _on_command(self, name: str, msg: Any) -> None:
         try:
             w = msg.wrench
-            wrench = np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z], float)
+            wrench = [float(w.force.x), float(w.force.y), float(w.force.z), float(w.torque.x),
+                      float(w.torque.y), float(w.torque.z)]
             stamp = mc.stamp_ns(msg.header.stamp)
         except (AttributeError, TypeError, ValueError) as exc:
             self._warn("badcmd", f"malformed command for robot {name!r} dropped: {exc}")
             return
+        self._command(name, stamp, wrench)
+
+    def _command(self, name: str, stamp: int, wrench: Any) -> None:
+        """Hold a robot's commanded body wrench stamped `stamp` (ns), with the checks below."""
         if name not in self.names:
             return
         now = self.now_ns()
@@ -379,7 +438,7 @@ class SimNode:
             return
         if not self.sim.command(wrench, name):
             self._warn("rejected", f"command rejected for robot {name!r} (non-finite or > 100 N/Nm): "
-                       f"{np.array2string(wrench, precision=3)}")
+                       f"{np.array2string(np.asarray(wrench, float), precision=3)}")
             return
         io = self.robot_io[name]
         # a command never answers a tick the sim has not reached: lockstep counts it for the
@@ -520,16 +579,36 @@ class SimNode:
         cs.header.frame_id = "world"
         return {"clock": M["clock"](), "tf": M["tf"](), "bag": bs, "bag_tfs": bts, "contacts": cs}
 
+    def _send(self, pub: Any, key: Any, msg: Any, fields: Any, values: list) -> None:
+        """Publish `msg` with `values` in its changing `fields` ((path, format) pairs, or a
+        function making them): spliced into the layout's CDR template (tick_wire), or set on
+        the object and serialised when the layout has no template."""
+        tpl = self._templates.get(key, self)
+        if tpl is self:                          # first time for this layout
+            if callable(fields):
+                fields = fields()
+            tpl = self._templates[key] = tick_wire.Template.build(
+                msg, self.roszen.codec.msg_support(pub.msg_type).serialize, fields)
+            self._template_fields[key] = fields
+        if tpl is not None:
+            pub.publish(tpl.pack(values))
+            return
+        for (path, _), v in zip(self._template_fields[key], values):
+            tick_wire._set(msg, path, v)
+        pub.publish(msg)
+
     def publish_state(self) -> None:
         t = self.now_ns()
+        sec, nsec = divmod(t, 1_000_000_000)
         g = self.__dict__.get("_msgs")
         if g is None:
             g = self._msgs = self._global_msgs()
-        clk = g["clock"]
-        mc.set_stamp_ns(clk.clock, t)
-        self.pub_clock.publish(clk)
-        transforms = []
+        tw_ = tick_wire
+        self._send(self.pub_clock, "clock", g["clock"], tw_.stamp_fields("clock"), [sec, nsec])
+        tf_children: list = []
+        tf_values: list = []
         positions = []
+        noisy = self._ekf_noisy
         for name in self.names:
             io = self.robot_io[name]
             msgs = io.get("msgs")
@@ -537,31 +616,27 @@ class SimNode:
                 msgs = io["msgs"] = self._robot_msgs(name)
             pos, q, v, w = self.sim.robot_state(name)
             positions.append(pos)
-            noisy = self._ekf_noisy
-            ps, tw, ekf, ts = msgs["pose"], msgs["twist"], msgs["ekf"], msgs["tfs"]
-            mc.set_stamp_ns(ps.header.stamp, t)      # shared by twist, ekf and tf
-            mc.set_pose(ps.pose, pos, q)             # shared by ekf (and its rotation by tf)
-            io["pose"].publish(ps)
-            mc.set_vec(tw.twist.linear, v)
-            mc.set_vec(tw.twist.angular, w)
-            io["twist"].publish(tw)
-            if noisy:                                # the estimate, on a pose of its own
-                pos_e, q, v, w = self._ekf_state(name)
-                if ekf.pose is ps.pose:
-                    ekf.pose = self.M["pose_"]()
-                mc.set_pose(ekf.pose, pos_e, q)
-            elif ekf.pose is not ps.pose:
-                ekf.pose = ps.pose
-            mc.set_vec(ekf.velocity, v)
-            mc.set_vec(ekf.omega, qrot((-q[0], -q[1], -q[2], q[3]), w))      # world -> body
-            io["ekf"].publish(ekf)
-            mc.set_vec(ts.transform.translation, pos)
-            transforms.append(ts)
+            p_, q_ = pos.tolist(), q.tolist()
+            pose_values = [sec, nsec, *p_, *q_]
+            self._send(io["pose"], ("pose", name), msgs["pose"], _POSE_FIELDS, pose_values)
+            self._send(io["twist"], ("twist", name), msgs["twist"], _TWIST_FIELDS,
+                       [sec, nsec, *v.tolist(), *w.tolist()])
+            if noisy:                                # the estimate (the truth topics stay truth)
+                pos_e, qe, v, w = self._ekf_state(name)
+                ekf_pose = [*pos_e.tolist(), *qe.tolist()]
+            else:
+                qe, ekf_pose = q_, pose_values[2:]
+            omega_b = qrot((-qe[0], -qe[1], -qe[2], qe[3]), w).tolist()          # world -> body
+            self._send(io["ekf"], ("ekf", name), msgs["ekf"], _EKF_FIELDS,
+                       [sec, nsec, *ekf_pose, *v.tolist(), *omega_b])
+            tf_children.append(msgs["tfs"])
+            tf_values += pose_values
             fault = self.sim.faulted(name)
             if fault != io["fault_state"]:
                 io["fault_state"] = fault
                 f = self.M["fault"]()
-                f.header = ps.header
+                mc.set_stamp_ns(f.header.stamp, t)
+                f.header.frame_id = "world"
                 f.source = "sim/propulsion_watchdog"
                 f.code = FAULT_WATCHDOG
                 f.active = bool(fault)
@@ -573,18 +648,21 @@ class SimNode:
         if info is not None:
             st = self.sim.bag_state()
             bs, bts = g["bag"], g["bag_tfs"]
-            mc.set_stamp_ns(bs.header.stamp, t)
             bs.model, bs.variant = info.model, info.variant
-            mc.set_pose(bs.pose, st.position, st.orientation)
-            mc.set_vec(bs.velocity, st.velocity)
-            mc.set_vec(bs.omega, st.omega)
-            bs.deformation = float(st.deformation)
-            bs.attached = np.array(st.attached, dtype=bool)
-            self.pub_bag.publish(bs)
-            mc.set_vec(bts.transform.translation, st.position)
-            transforms.append(bts)
+            bp, bq = st.position.tolist(), st.orientation.tolist()
+            attached = [bool(a) for a in st.attached]
+            if len(bs.attached) != len(attached):
+                bs.attached = np.array(attached, dtype=bool)
+            n = len(attached)
+            self._send(self.pub_bag, ("bag", info.model, info.variant, n), bs,
+                       lambda: _BAG_FIELDS + [(f"attached.{k}", "?") for k in range(n)],
+                       [sec, nsec, *bp, *bq, *st.velocity.tolist(), *st.omega.tolist(),
+                        float(st.deformation), *attached])
+            tf_children.append(bts)
+            tf_values += [sec, nsec, *bp, *bq]
             if self.sim.time - self._last_mesh >= 1.0 / self.mesh_rate - 1e-9:
                 self._last_mesh = self.sim.time
+                mc.set_stamp_ns(bs.header.stamp, t)
                 pts = self.sim.bag_points()
                 mm = self.M["mesh"]()
                 mm.header = bs.header
@@ -594,22 +672,35 @@ class SimNode:
                 self.pub_bag_marker.publish(self.bag_surface.payload(        # CDR bytes
                     getattr(self.sim, "bag", None), pts, bs.header, self._marker_cdr))
         tf = g["tf"]
-        tf.transforms = transforms
-        self.pub_tf.publish(tf)
+        key = ("tf", *(id(c) for c in tf_children))
+        if key not in self._templates:
+            tf.transforms = tf_children
+        self._send(self.pub_tf, key, tf, lambda: [
+            f for i in range(len(tf_children)) for f in
+            tw_.stamp_fields(f"transforms.{i}.header.stamp") +
+            tw_.vec_fields(f"transforms.{i}.transform.translation") +
+            [(f"transforms.{i}.transform.rotation.{a}", "d") for a in "xyzw"]], tf_values)
         cs = g["contacts"]
-        mc.set_stamp_ns(cs.header.stamp, t)
-        lst = []
-        for c in self.sim.contacts():
-            m = self.M["contact"]()
-            m.body_a, m.body_b = c.body_a, c.body_b
-            mc.set_vec(m.position, c.position)
-            mc.set_vec(m.normal, c.normal)
-            m.normal_force = float(c.normal_force)
-            lst.append(m)
-        cs.contacts = lst
-        cs.in_contact = bool(lst)
-        cs.robot_clearance, cs.bag_clearance = float(rc), float(bc)
-        self.pub_contacts.publish(cs)
+        contacts = self.sim.contacts()
+        if not contacts:
+            if cs.contacts:
+                cs.contacts, cs.in_contact = [], False
+            self._send(self.pub_contacts, "contacts", cs, _CONTACTS_FIELDS,
+                       [sec, nsec, float(rc), float(bc)])
+        else:
+            lst = []
+            for c in contacts:
+                m = self.M["contact"]()
+                m.body_a, m.body_b = c.body_a, c.body_b
+                mc.set_vec(m.position, c.position)
+                mc.set_vec(m.normal, c.normal)
+                m.normal_force = float(c.normal_force)
+                lst.append(m)
+            cs.contacts = lst
+            cs.in_contact = True
+            mc.set_stamp_ns(cs.header.stamp, t)
+            cs.robot_clearance, cs.bag_clearance = float(rc), float(bc)
+            self.pub_contacts.publish(cs)
         effects = getattr(self.sim, "effects", None)
         if effects is not None and len(effects.log) != self._realism_applied:
             self.publish_realism()
@@ -763,16 +854,29 @@ class SimNode:
         """Wait (lockstep), step to the next publish tick, publish."""
         if self.clock_mode == "lockstep":
             self._wait_commands()
+        if self.tick == 0:                  # the run (since start or the last reset) begins
+            self._run_mark = (time.perf_counter(), time.process_time(), self.sim.time)
         self.tick += 1
         target = int(round(self.tick / self.publish_rate / self.sim.dt))
         self.sim.step(max(1, target - self.sim.steps))
         self.publish_state()
 
+    def _rate(self) -> str:
+        """': S sim s in W wall s (Rx real time), C CPU s (Px per CPU s)' since the run's first
+        tick ('' before one); the CPU is this process's, its transport threads included."""
+        mark = self.__dict__.get("_run_mark")
+        if mark is None:
+            return ""
+        wall, cpu, sim = (time.perf_counter() - mark[0], time.process_time() - mark[1],
+                          self.sim.time - mark[2])
+        return (f": {sim:.3f} sim s in {wall:.3f} wall s ({sim / max(wall, 1e-9):.1f}x real time), "
+                f"{cpu:.3f} CPU s ({sim / max(cpu, 1e-9):.1f}x per CPU s)")
+
     def spin(self) -> None:
         import roszen
         while roszen.ok() and self.node._alive:
             if self.max_sim_time and self.sim.time >= self.max_sim_time:
-                self.log.info(f"max_sim_time {self.max_sim_time:g} s reached")
+                self.log.info(f"max_sim_time {self.max_sim_time:g} s reached{self._rate()}")
                 return
             self._drain(0.0)
             if self.paused:

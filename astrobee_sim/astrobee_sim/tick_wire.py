@@ -1,0 +1,136 @@
+"""The sim's per-tick messages as CDR bytes with their changing numbers rewritten in place.
+
+A tick's messages keep their layout from tick to tick (frame ids, child frame ids, the bag's
+model names and handle count do not change), so each is serialised once as a template and only
+its stamps, poses, velocities and clearances are packed into a copy with struct at offsets found
+once (each field set to a sentinel, serialised, located). A template is checked at build time
+against the real serializer on random values and refused (None: the caller serialises the
+message object as before) if a single byte differs, so the wire stays byte-identical.
+Transport-free: the serializer is passed in.
+"""
+from __future__ import annotations
+
+import random
+import struct
+from typing import Any, Callable, Sequence
+
+FORMATS = {"d": 8, "i": 4, "I": 4, "?": 1}
+
+
+def _get(msg: Any, path: str) -> Any:
+    for part in path.split("."):
+        msg = msg[int(part)] if part.isdigit() else getattr(msg, part)
+    return msg
+
+
+def _set(msg: Any, path: str, value: Any) -> None:
+    head, _, last = path.rpartition(".")
+    obj = _get(msg, head) if head else msg
+    if last.isdigit():
+        obj[int(last)] = value
+    else:
+        setattr(obj, last, value)
+
+
+def _sentinel(fmt: str, k: int) -> Any:
+    """A value of field k whose bytes are unlikely anywhere else in a message."""
+    if fmt == "d":
+        return struct.unpack("<d", struct.pack("<Q", 0x1DEADBEEF0000001 + (k << 20) * 7919))[0]
+    return 0x2A5C0000 + k * 263 if fmt == "i" else 0x3A3C0000 + k * 263     # < 10**9: nanosec
+
+
+def _random(fmt: str, rng: random.Random) -> Any:
+    return {"d": lambda: rng.uniform(-30.0, 30.0), "i": lambda: rng.randrange(0, 2**31),
+            "I": lambda: rng.randrange(0, 10**9), "?": lambda: rng.random() < 0.5}[fmt]()
+
+
+class Template:
+    """CDR bytes of one message layout; `pack(values)` returns the bytes with `values` (one per
+    field, in the order given) in place. Build with Template.build (None if refused)."""
+
+    def __init__(self, data: bytes, runs: list[tuple[int, struct.Struct, int, int]]):
+        self._data = data
+        self._runs = runs           # (offset, Struct, first value index, value count)
+
+    @classmethod
+    def build(cls, msg: Any, serialize: Callable[[Any], bytes],
+              fields: Sequence[tuple[str, str]], checks: int = 3) -> "Template | None":
+        """fields: (dotted attribute path, struct format 'd'/'i'/'I'/'?') of the numbers that
+        change, in wire order; a '?' field must follow a field of the list directly (bools of a
+        fixed-length sequence: they are placed, not searched). `msg` is left as it was."""
+        try:
+            saved = [_get(msg, p) for p, _ in fields]
+        except (AttributeError, IndexError, TypeError, ValueError):
+            return None
+        try:
+            offsets = cls._locate(msg, serialize, fields)
+            if offsets is None:
+                return None
+            runs: list = []
+            for k, ((_, fmt), off) in enumerate(zip(fields, offsets)):
+                if runs and runs[-1][0] + runs[-1][1] == off:
+                    o, size, fm, first, n = runs[-1]
+                    runs[-1] = (o, size + FORMATS[fmt], fm + fmt, first, n + 1)
+                else:
+                    runs.append((off, FORMATS[fmt], fmt, k, 1))
+            for p, v in zip((p for p, _ in fields), saved):
+                _set(msg, p, v)
+            t = cls(serialize(msg), [(o, struct.Struct("<" + fm), first, n)
+                                     for o, _, fm, first, n in runs])
+            rng = random.Random(12345)
+            for _ in range(checks):               # byte-identical to the serializer, or refused
+                vals = [_random(fmt, rng) for _, fmt in fields]
+                for (p, _), v in zip(fields, vals):
+                    _set(msg, p, v)
+                if t.pack(vals) != serialize(msg):
+                    return None
+            return t
+        except (AttributeError, IndexError, TypeError, ValueError, struct.error):
+            return None
+        finally:
+            for (p, _), v in zip(fields, saved):
+                _set(msg, p, v)
+
+    @staticmethod
+    def _locate(msg: Any, serialize: Callable[[Any], bytes],
+                fields: Sequence[tuple[str, str]]) -> list[int] | None:
+        """Offset of each field in the serialised message (None: a sentinel not found once)."""
+        for k, (p, fmt) in enumerate(fields):
+            if fmt != "?":
+                _set(msg, p, _sentinel(fmt, k))
+        data = serialize(msg)
+        out: list[int] = []
+        for k, (p, fmt) in enumerate(fields):
+            if fmt == "?":
+                if not out:
+                    return None
+                prev = fields[k - 1][1]
+                out.append(out[-1] + FORMATS[prev] + (4 if prev != "?" else 0))   # + length
+                continue
+            b = struct.pack("<" + fmt, _sentinel(fmt, k))
+            i = data.find(b)
+            if i < 0 or data.find(b, i + 1) >= 0:
+                return None
+            out.append(i)
+        if out != sorted(out):
+            return None
+        return out
+
+    def pack(self, values: Sequence[Any]) -> bytes:
+        """The message's bytes with `values` in place."""
+        buf = bytearray(self._data)
+        for off, st, first, n in self._runs:
+            st.pack_into(buf, off, *values[first:first + n])
+        return bytes(buf)
+
+
+def stamp_fields(prefix: str = "header.stamp") -> list[tuple[str, str]]:
+    return [(f"{prefix}.sec", "i"), (f"{prefix}.nanosec", "I")]
+
+
+def vec_fields(prefix: str) -> list[tuple[str, str]]:
+    return [(f"{prefix}.{a}", "d") for a in "xyz"]
+
+
+def pose_fields(prefix: str) -> list[tuple[str, str]]:
+    return vec_fields(f"{prefix}.position") + [(f"{prefix}.orientation.{a}", "d") for a in "xyzw"]
