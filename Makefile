@@ -28,7 +28,7 @@ $(STAMP): pyproject.toml setup.py
 	@touch $(STAMP)
 
 test: $(STAMP)
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q --durations=15 tests
 
 # three legs in one graph (cargo_transport.DEMO_LEGS): no bag (PD), the FEM bag (fast solver,
 # PD), the FEM bag flown by the sampling MPC (robot queen); runs/<t>/: summary.json, one plot
