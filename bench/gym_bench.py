@@ -113,8 +113,8 @@ def main() -> int:
     print("reference: the library loop (bench/sim_rtf.py) is the ceiling of one env; "
           "2 workers on 2 cores can at most double it; pyastrobee's FEM bag runs 0.6x real time "
           "(~38 ticks/s); before the single-quaternion rotation paths (load 4-10), one env "
-          "per CPU s: rigid 1400-1800 residual / 1650-1890 wrench, constraint 1140-1650 / "
-          "1450-1770, fast FEM 496-525")
+          "per CPU s: rigid 1400-1800 residual / 1650-1890 wrench, constraint 1140-1750 / "
+          "1450-1770, fast FEM 496-568")
     return 0
 
 
