@@ -111,7 +111,6 @@ class SafetyFilterNode:
 
         M = roszen.message_class
         self.FamCommand = M("astrobee_msgs/msg/FamCommand")
-        self.pub_cmd = n.create_publisher("astrobee_msgs/msg/FamCommand", mc.COMMAND, 10)
         self.diagnostics = SafetyDiagnostics(n, self.lf)
         n.create_subscription("astrobee_msgs/msg/EkfState", mc.EKF, self._on_ekf, 10)
         n.create_subscription("astrobee_msgs/msg/FlightMode", mc.FLIGHT_MODE, self._on_flight_mode,
@@ -120,6 +119,10 @@ class SafetyFilterNode:
                               LATCHED)
         n.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
         n.create_subscription("astrobee_msgs/msg/FamCommand", COMMAND_NOMINAL, self._on_command, 10)
+        # declared last: a publisher of the command in the graph says every input above is
+        # subscribed (the mission's deterministic start waits for it; callbacks run only once
+        # the node spins, after this constructor)
+        self.pub_cmd = n.create_publisher("astrobee_msgs/msg/FamCommand", mc.COMMAND, 10)
         self.log.info(f"safety filter up: flight mode {mode.name}, margin "
                       f"{self.filter.margin:.2f} m, {len(self.filter.boxes)} candidate boxes")
 

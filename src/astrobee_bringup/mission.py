@@ -44,7 +44,7 @@ from astrobee import msgconv as mc
 from astrobee import rotations as rot
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup import summary as sm
-from astrobee_bringup.peers import PeerLost, PeerWatch
+from astrobee_bringup.peers import PeerLost, PeerWatch, relay_missing
 
 IDLE, STOPPED, STOPPING, CONTROLLING = (mc.MotionState.IDLE, mc.MotionState.STOPPED,
                                         mc.MotionState.STOPPING, mc.MotionState.CONTROLLING)
@@ -446,8 +446,9 @@ class MissionClient:
 
     def _graph_not_ready(self, robots: list[str]) -> str:
         """Why the graph cannot take a deterministic leg yet ("" when it can): each robot's
-        controller up (its latched /mob/state) with a publisher of its command topic (a safety
-        filter subscribed to the controller's), a recorder on every topic of the sim."""
+        controller up (its latched /mob/state) with a publisher of its command topic (with a
+        safety filter, safety:=node: a node publishing it that subscribes the controller's
+        `<cmd>_nominal`), a recorder on every topic of the sim."""
         n = self.node
         for r in robots:
             w = self.watch(r)
@@ -456,8 +457,9 @@ class MissionClient:
                 return f"{w.named}: no controller ({mc.robot_topic(r, sm.MOB_STATE)})"
             if n.count_publishers(cmd) == 0:
                 return f"{w.named}: no publisher of {cmd}"
-            if n.count_publishers(cmd + "_nominal") and not n.count_subscribers(cmd + "_nominal"):
-                return f"{w.named}: no subscriber of {cmd}_nominal"
+            why = relay_missing(n, cmd + "_nominal", cmd)
+            if why:
+                return f"{w.named}: {why}"
         if self.await_recorder:
             for topic, _ in n.get_topic_names_and_types():
                 if any(p.startswith("_") for p in topic.split("/") if p):

@@ -66,3 +66,15 @@ class PeerWatch:
         gone = self.update()
         if gone:
             raise PeerLost("lost " + ", ".join(gone))
+
+
+def relay_missing(node: Any, upstream: str, downstream: str) -> str:
+    """Why no node relays `upstream` to `downstream` (subscribes one, publishes the other: a
+    safety_filter_node) while `upstream` has publishers; "" when one does or none publishes.
+    A mere subscriber does not count: the recorder subscribes every topic."""
+    if node.count_publishers(upstream) == 0:
+        return ""
+    readers = {e.node_key for e in node.get_subscriptions_info_by_topic(upstream)}
+    if any(e.node_key in readers for e in node.get_publishers_info_by_topic(downstream)):
+        return ""
+    return f"no node relaying {upstream} to {downstream} (a safety filter) yet"
