@@ -24,6 +24,16 @@ import numpy as np
 from .world import World, module_colour
 
 UP = np.array([0.0, 0.0, -1.0])     # ISS frame: +z is nadir (the deck), so "up" on screen is -z
+# Farther than this (m) from the origin nothing is drawn: TinyRenderer works in float32, and a
+# robot flung 1e7 m off by an exploded simulation (a failed leg) turns its mesh next to the
+# chase camera into screen-sized triangles: one frame took over a minute (3e6 m: 10 ms).
+MAX_COORD = 1000.0
+
+
+def drawable(points) -> bool:
+    """Finite and within MAX_COORD of the origin (what the renderer can draw in time)."""
+    a = np.asarray(points, float)
+    return bool(np.all(np.isfinite(a)) and np.all(np.abs(a) <= MAX_COORD))
 
 # Faces of a box whose 8 corners are ordered as rigid_base._CORNERS (index 4*ix + 2*iy + iz).
 BOX_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
@@ -172,10 +182,11 @@ class Renderer:
             self.robots.append(Robot(self.client))
             self._arm = None
         for k, r in enumerate(self.robots):
-            if k < len(robots):
+            if k < len(robots) and drawable(robots[k][0]) and np.all(np.isfinite(robots[k][1])) \
+                    and np.linalg.norm(robots[k][1]) > 1e-9:
                 r.set_pose(robots[k][0], robots[k][1])
-            else:                                         # not in this scene: park it far away
-                r.set_pose((1e4, 1e4, 1e4 + 10 * k), (0, 0, 0, 1))
+            else:                       # not in this scene (or not drawable): park it far away
+                r.set_pose((500.0, 500.0, 500.0 + 10 * k), (0, 0, 0, 1))
         if self._arm != arm_deployed:
             for r in self.robots:
                 r.deploy_arm(arm_deployed, instant=True)
@@ -186,7 +197,7 @@ class Renderer:
         if self._bag_body is not None:
             p.removeBody(self._bag_body, physicsClientId=c)
             self._bag_body = None
-        if bag is None or len(bag.faces) == 0:
+        if bag is None or len(bag.faces) == 0 or not drawable(bag.vertices):
             return
         # a fresh visual mesh per frame (~0.3 ms for ~500 triangles): the FEM bag deforms
         vis = p.createVisualShape(p.GEOM_MESH, vertices=np.asarray(bag.vertices, float).tolist(),
@@ -201,17 +212,22 @@ class Renderer:
         p = self.p
         self._set_robots(scene.robots, scene.arm_deployed)
         self._set_bag(scene.bag)
-        view, proj = camera.matrices(width, height)
-        light = (-(np.asarray(camera.target) - np.asarray(camera.eye)) + 0.5 * (-UP)).tolist()
-        img = p.getCameraImage(width, height, view, proj, renderer=p.ER_TINY_RENDERER,
-                               lightDirection=light, shadow=0,
-                               flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.client)
-        rgb = np.asarray(img[2], dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
-        if not scene.lines and not (draw_text and scene.text):
+        lines = [ln for ln in scene.lines if drawable(ln.points)]
+        if drawable(camera.eye) and drawable(camera.target) \
+                and np.linalg.norm(np.subtract(camera.target, camera.eye)) > 1e-9:
+            view, proj = camera.matrices(width, height)
+            light = (-(np.asarray(camera.target) - np.asarray(camera.eye)) + 0.5 * (-UP)).tolist()
+            img = p.getCameraImage(width, height, view, proj, renderer=p.ER_TINY_RENDERER,
+                                   lightDirection=light, shadow=0,
+                                   flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.client)
+            rgb = np.asarray(img[2], dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
+        else:                                   # nowhere to look from: a blank picture
+            rgb, lines = np.full((height, width, 3), 30, np.uint8), []
+        if not lines and not (draw_text and scene.text):
             return np.ascontiguousarray(rgb)
         im = Image.fromarray(np.ascontiguousarray(rgb))
         d = ImageDraw.Draw(im)
-        for line in scene.lines:
+        for line in lines:
             for run in project(line.points, view, proj, width, height, camera.near):
                 d.line(run, fill=tuple(line.rgb), width=line.width)
         if draw_text and scene.text:

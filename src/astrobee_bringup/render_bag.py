@@ -33,6 +33,11 @@ from astrobee import rotations as rot
 
 DEFAULT_FPS = 10
 DEFAULT_SPEED = 4.0                    # sim seconds per video second
+MAX_FRAMES = 3000                      # a longer video is refused (5 min at 10 fps; a leg ~110)
+MAX_COORD = 1000.0                     # m: a sample farther from the origin is dropped (the ISS
+# frame spans tens of metres; an exploded simulation's 1e7 m puts the robot's mesh, in the
+# renderer's float32, into screen-sized triangles next to the camera: >30 s a frame, measured)
+IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 PATH_RGB, TRAIL_RGB, CAND_RGB = (40, 210, 70), (80, 160, 255), (235, 80, 200)
 
 
@@ -47,19 +52,24 @@ class Track:
         """Pose at time t: positions interpolated, quaternions normalised-lerped."""
         i = int(np.searchsorted(self.t, t))
         if i <= 0:
-            return self.pos[0], self.quat[0]
+            return self.pos[0], _unit_quat(self.quat[0])
         if i >= len(self.t):
-            return self.pos[-1], self.quat[-1]
+            return self.pos[-1], _unit_quat(self.quat[-1])
         t0, t1 = self.t[i - 1], self.t[i]
         s = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
         q0, q1 = self.quat[i - 1], self.quat[i]
         if float(q0 @ q1) < 0:
             q1 = -q1
-        q = (1 - s) * q0 + s * q1
-        return (1 - s) * self.pos[i - 1] + s * self.pos[i], q / np.linalg.norm(q)
+        return (1 - s) * self.pos[i - 1] + s * self.pos[i], _unit_quat((1 - s) * q0 + s * q1)
 
     def velocity(self, t: float, dt: float = 0.25) -> np.ndarray:
         return (self.at(t + dt / 2)[0] - self.at(t - dt / 2)[0]) / dt
+
+
+def _unit_quat(q: np.ndarray) -> np.ndarray:
+    """q normalised; the identity for a zero quaternion (no 0/0 NaN into the renderer)."""
+    n = float(np.linalg.norm(q))
+    return q / n if n > 1e-9 else IDENTITY
 
 
 @dataclass
@@ -156,8 +166,14 @@ def read_recording(bag_dir: str | os.PathLike,
                     poses.setdefault(name, []).append(
                         (ln, _stamp(tf.header), _xyz(tf.transform.translation),
                          _xyzw(tf.transform.rotation)))
+    recorded = sum(len(v) for v in poses.values())
+    poses = {k: [p for p in v if _usable(p[2], p[3])] for k, v in poses.items()}
     poses = {k: v for k, v in poses.items() if v}
     if not poses:
+        if recorded:
+            raise RenderError(f"{bag_dir}: none of the {recorded} robot poses recorded"
+                              + (" in the selected window" if log_window else "")
+                              + f" is usable (not finite, or farther than {MAX_COORD:g} m)")
         raise RenderError(f"{bag_dir}: no robot pose recorded (/loc/truth/pose or /tf)"
                           + (" in the selected window" if log_window else ""))
     ref = poses.get("") or next(iter(poses.values()))
@@ -169,16 +185,28 @@ def read_recording(bag_dir: str | os.PathLike,
     for topic in (n for n in raw if n.endswith("/mob/planner/path")):
         for ln, msg in raw[topic]:
             pts = np.array([_xyz(ps.pose.position) for ps in msg.poses]).reshape(-1, 3)
-            if len(pts) >= 2:
+            if len(pts) >= 2 and _usable(pts):
                 rec.paths.append((line.of(ln), pts))
     for topic in (n for n in raw if n.endswith("/gnc/ctl/candidates")):
         for ln, msg in raw[topic]:
-            lines = _candidate_lines(msg)
+            lines = [c for c in _candidate_lines(msg) if _usable(c)]
             if lines:
                 rec.candidates.append((line.of(ln), lines))
     rec.paths.sort(key=lambda x: x[0])
     rec.candidates.sort(key=lambda x: x[0])
     return rec
+
+
+def _usable(pos: Any, quat: Any | None = None) -> bool:
+    """A sample the renderer can draw: finite, within MAX_COORD of the origin, a quaternion
+    of non-zero norm."""
+    p = np.asarray(pos, float)
+    if not (np.all(np.isfinite(p)) and np.all(np.abs(p) <= MAX_COORD)):
+        return False
+    if quat is None:
+        return True
+    q = np.asarray(quat, float)
+    return bool(np.all(np.isfinite(q)) and np.linalg.norm(q) > 1e-6)
 
 
 def _xyz(v: Any) -> list[float]:
@@ -213,7 +241,8 @@ def _candidate_lines(msg: Any) -> list[np.ndarray]:
 
 def _read_bag_topics(rec: Recording, raw: dict, line: _Timeline) -> None:
     """The cargo bag's state track and its mesh samples in the bag frame."""
-    states = [(ln, msg) for n in raw if n.endswith("/sim/bag/state") for ln, msg in raw[n]]
+    states = [(ln, msg) for n in raw if n.endswith("/sim/bag/state") for ln, msg in raw[n]
+              if _usable(_xyz(msg.pose.position), _xyzw(msg.pose.orientation))]
     meshes = [(ln, msg) for n in raw if n.endswith("/sim/bag/mesh") for ln, msg in raw[n]]
     if states:
         rec.bag = _track([(line.of(ln, _stamp(m.header)), _xyz(m.pose.position),
@@ -223,7 +252,7 @@ def _read_bag_topics(rec: Recording, raw: dict, line: _Timeline) -> None:
     times, local = [], []
     for ln, m in meshes:
         pts = np.asarray(m.positions, float).reshape(-1, 3)
-        if len(pts) < 4 or (local and len(pts) != len(local[0])):
+        if len(pts) < 4 or (local and len(pts) != len(local[0])) or not _usable(pts):
             continue
         t = line.of(ln, _stamp(m.header))
         if rec.bag is not None:
@@ -366,12 +395,13 @@ def render(bag_dir: str | os.PathLike, out: str | os.PathLike, *, fps: float = D
            speed: float = DEFAULT_SPEED, scale: float = 1.0,
            log_window: tuple[float, float] | None = None, start: float = 0.0,
            duration: float | None = None, title: str = "",
-           progress: Callable[[int, int], None] | None = None) -> RenderResult:
+           progress: Callable[[int, int], None] | None = None,
+           max_frames: int = MAX_FRAMES) -> RenderResult:
     """Render a recording to `out` (.mp4 through ffmpeg, .gif through Pillow). `speed` is sim
     seconds per video second; `start`/`duration` (sim s from the first pose) cut the flight;
-    `scale` multiplies the default 896x384 frame."""
+    `scale` multiplies the default 896x384 frame; more than `max_frames` frames is refused."""
     from astrobee_sim.render import FlightRenderer, overview_camera
-    if fps <= 0 or speed <= 0 or scale <= 0:
+    if not all(math.isfinite(v) and v > 0 for v in (fps, speed, scale)):
         raise RenderError("--fps, --speed and --scale must be > 0")
     out = Path(out)
     kind = out.suffix.lower()
@@ -386,7 +416,7 @@ def render(bag_dir: str | os.PathLike, out: str | os.PathLike, *, fps: float = D
     if t1 < t0:
         raise RenderError(f"--start {start:g} s is past the end of the flight "
                           f"({t_last - t_first:.1f} s)")
-    n = int(math.floor((t1 - t0) * fps / speed)) + 1
+    n = frame_count(t1 - t0, fps, speed, max_frames)
     times = t0 + np.arange(n) * speed / fps
     even = lambda v: max(16, int(round(v * scale / 16)) * 16)   # noqa: E731 - codec blocks
     fr = FlightRenderer((even(512), even(384)), (even(384), even(384)))
@@ -408,6 +438,21 @@ def render(bag_dir: str | os.PathLike, out: str | os.PathLike, *, fps: float = D
     finally:
         fr.close()
     return RenderResult(out, n, fr.size, float(t1 - t0), rec.mesh_source or "none")
+
+
+def frame_count(seconds: float, fps: float, speed: float, max_frames: int = MAX_FRAMES) -> int:
+    """Frames of a video of `seconds` of flight at `fps` and `speed` (sim s per video s): one
+    for a zero-length flight; RenderError (one line) when it is not finite or more than
+    max_frames."""
+    if not (math.isfinite(seconds) and seconds >= 0 and fps > 0 and speed > 0):
+        raise RenderError(f"no finite flight to render ({seconds:g} s at --fps {fps:g}, "
+                          f"--speed {speed:g})")
+    n = int(math.floor(seconds * fps / speed)) + 1
+    if n > max_frames:
+        raise RenderError(f"{seconds:.1f} s of flight at --speed {speed:g} and --fps {fps:g} "
+                          f"is {n} frames, more than {max_frames}: cut it (--start, --duration) "
+                          f"or raise --speed")
+    return n
 
 
 class _Mp4:
@@ -459,8 +504,9 @@ def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | No
                      **options: Any) -> list[Path]:
     """One video per leg of a run (runs/<t>/video_<scenario>.mp4, or video.mp4 for one leg),
     each leg cut from the recording by its wall-clock window in summary.json; the file name is
-    noted in the leg's entry of summary.json. A leg that cannot be rendered gets
-    `video_error` instead. Returns the videos written."""
+    noted in the leg's entry of summary.json. A leg that cannot be rendered (a failed leg with
+    no usable pose, an empty window, too long a flight) gets `video_error`, one line, instead.
+    Returns the videos written."""
     from astrobee_bringup.summary import write_json
     run_dir = Path(run_dir)
     bag_dir = Path(bag_dir) if bag_dir else run_dir / "bag"
@@ -472,11 +518,15 @@ def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | No
         if leg.get("wall_t0") is None or leg.get("wall_t1") is None:
             continue
         name = "video.mp4" if len(legs) == 1 else f"video_{leg.get('scenario', len(written))}.mp4"
+        window = (float(leg["wall_t0"]), float(leg["wall_t1"]))
         try:
-            render(bag_dir, run_dir / name, log_window=(leg["wall_t0"], leg["wall_t1"]),
+            if not (math.isfinite(window[0]) and math.isfinite(window[1])
+                    and window[1] > window[0]):
+                raise RenderError(f"empty leg: wall-clock window {window[0]:.3f}-{window[1]:.3f}")
+            render(bag_dir, run_dir / name, log_window=window,
                    title=str(leg.get("scenario", "")), **options)
-        except RenderError as exc:
-            leg["video_error"] = str(exc)
+        except (RenderError, ValueError, ArithmeticError) as exc:
+            leg["video_error"] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             continue
         leg["video"] = name
         written.append(run_dir / name)

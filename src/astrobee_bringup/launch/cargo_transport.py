@@ -35,6 +35,7 @@ exits, so the bag holds the fault and the coasting robot. Without it, the contro
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 from astrobee.config import load_yaml
 from astrobee.scenario import Scenario, ScenarioError
@@ -221,3 +222,17 @@ def post_run(ctx: LaunchContext, status: int) -> None:
             from astrobee_bringup.render_bag import render_demo_legs
             for path in render_demo_legs(ctx.run_dir, bag_dir):
                 print(f"[video] {path}", flush=True)
+            _print_video_errors(ctx.run_dir / "summary.json")
+
+
+def _print_video_errors(summary: Path) -> None:
+    """One line per leg left without a video, with the reason summary.json notes."""
+    import json
+    try:
+        legs = json.loads(summary.read_text()).get("legs", [])
+    except (OSError, ValueError):
+        return
+    for leg in legs:
+        if leg.get("video_error"):
+            print(f"[video] {leg.get('scenario', '?')}: not rendered: {leg['video_error']}",
+                  flush=True)
