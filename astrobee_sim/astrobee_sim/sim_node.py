@@ -62,7 +62,6 @@ from astrobee.scenario import Scenario, ScenarioError  # noqa: E402
 
 from . import markers, tick_wire  # noqa: E402
 from .backend import BACKENDS, SimBackend, make_backend  # noqa: E402
-from .robot import qrot  # noqa: E402
 from .simulation import sim_defaults  # noqa: E402
 
 FAULT_WATCHDOG = 1
@@ -85,6 +84,17 @@ _EKF_FIELDS = (tick_wire.stamp_fields() + tick_wire.pose_fields("pose")
 _BAG_FIELDS = (tick_wire.stamp_fields() + tick_wire.pose_fields("pose") + tick_wire.vec_fields("velocity")
                + tick_wire.vec_fields("omega") + [("deformation", "d")])
 _CONTACTS_FIELDS = tick_wire.stamp_fields() + [("robot_clearance", "d"), ("bag_clearance", "d")]
+_CLOCK_FIELDS = tick_wire.stamp_fields("clock")
+
+
+def _to_body(q: Any, v: list) -> tuple[float, float, float]:
+    """A world vector in the body frame of q [x,y,z,w]: robot.qrot by the conjugate, same
+    arithmetic, as floats."""
+    x, y, z, w = -q[0], -q[1], -q[2], q[3]
+    vx, vy, vz = v
+    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
+    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
+            vz + w * tz + x * ty - y * tx)
 
 
 class ParameterError(ValueError):
@@ -338,6 +348,7 @@ class SimNode:
         self._realism_applied = -1      # pulses in the last /sim/realism
         self._command_support = roszen.codec.msg_support("astrobee_msgs/msg/FamCommand")
         self._templates: dict = {}      # per-tick message layouts -> tick_wire.Template | None
+        self._noisy_for: tuple = (None, False)    # (scenario, its EKF is noisy)
         self._template_fields: dict = {}
         self._ekf_state = getattr(backend, "ekf_state", backend.robot_state)
         self.robot_io: dict[str, dict] = {}
@@ -604,11 +615,14 @@ class SimNode:
         if g is None:
             g = self._msgs = self._global_msgs()
         tw_ = tick_wire
-        self._send(self.pub_clock, "clock", g["clock"], tw_.stamp_fields("clock"), [sec, nsec])
+        self._send(self.pub_clock, "clock", g["clock"], _CLOCK_FIELDS, [sec, nsec])
         tf_children: list = []
         tf_values: list = []
         positions = []
-        noisy = self._ekf_noisy
+        sc = self.sim.scenario
+        if sc is not self._noisy_for[0]:
+            self._noisy_for = (sc, sc.realism.ekf_noisy)
+        noisy = self._noisy_for[1]
         for name in self.names:
             io = self.robot_io[name]
             msgs = io.get("msgs")
@@ -626,9 +640,8 @@ class SimNode:
                 ekf_pose = [*pos_e.tolist(), *qe.tolist()]
             else:
                 qe, ekf_pose = q_, pose_values[2:]
-            omega_b = qrot((-qe[0], -qe[1], -qe[2], qe[3]), w).tolist()          # world -> body
             self._send(io["ekf"], ("ekf", name), msgs["ekf"], _EKF_FIELDS,
-                       [sec, nsec, *ekf_pose, *v.tolist(), *omega_b])
+                       [sec, nsec, *ekf_pose, *v.tolist(), *_to_body(qe, w.tolist())])
             tf_children.append(msgs["tfs"])
             tf_values += pose_values
             fault = self.sim.faulted(name)
@@ -672,7 +685,7 @@ class SimNode:
                 self.pub_bag_marker.publish(self.bag_surface.payload(        # CDR bytes
                     getattr(self.sim, "bag", None), pts, bs.header, self._marker_cdr))
         tf = g["tf"]
-        key = ("tf", *(id(c) for c in tf_children))
+        key = ("tf", tuple(self.names), info is not None)
         if key not in self._templates:
             tf.transforms = tf_children
         self._send(self.pub_tf, key, tf, lambda: [
@@ -756,10 +769,6 @@ class SimNode:
         m.realism = yaml.safe_dump(sc.realism.changed(), sort_keys=False)
         m.yaml = sc.to_yaml()
         self.pub_scenario.publish(m)
-
-    @property
-    def _ekf_noisy(self) -> bool:
-        return self.sim.scenario.realism.ekf_noisy
 
     def publish_realism(self) -> None:
         """Latched /sim/realism: the knobs in effect, the pulse schedule and the pulses applied

@@ -46,11 +46,28 @@ def _random(fmt: str, rng: random.Random) -> Any:
 
 class Template:
     """CDR bytes of one message layout; `pack(values)` returns the bytes with `values` (one per
-    field, in the order given) in place. Build with Template.build (None if refused)."""
+    field, in the order given) in place: one struct.pack of the whole message, the constant
+    bytes between the fields passed as byte strings. Build with Template.build (None if
+    refused)."""
 
-    def __init__(self, data: bytes, runs: list[tuple[int, struct.Struct, int, int]]):
-        self._data = data
-        self._runs = runs           # (offset, Struct, first value index, value count)
+    def __init__(self, data: bytes, fields: Sequence[tuple[str, str]], offsets: Sequence[int]):
+        fmt, args, ns, pos = ["<"], [], {}, 0
+        for k, ((_, f), off) in enumerate(zip(fields, offsets)):
+            if off > pos:                               # constant bytes before this field
+                ns[f"c{k}"] = data[pos:off]
+                fmt.append(f"{off - pos}s")
+                args.append(f"c{k}")
+            fmt.append(f)
+            args.append(f"v[{k}]")
+            pos = off + FORMATS[f]
+        if pos < len(data):
+            ns["tail"] = data[pos:]
+            fmt.append(f"{len(data) - pos}s")
+            args.append("tail")
+        ns["_pack"] = struct.Struct("".join(fmt)).pack
+        exec(f"def pack(v):\n    return _pack({', '.join(args)})", ns)   # noqa: S102 - our own code
+        self.pack: Callable[[Sequence[Any]], bytes] = ns["pack"]
+        self.size = len(data)
 
     @classmethod
     def build(cls, msg: Any, serialize: Callable[[Any], bytes],
@@ -66,17 +83,9 @@ class Template:
             offsets = cls._locate(msg, serialize, fields)
             if offsets is None:
                 return None
-            runs: list = []
-            for k, ((_, fmt), off) in enumerate(zip(fields, offsets)):
-                if runs and runs[-1][0] + runs[-1][1] == off:
-                    o, size, fm, first, n = runs[-1]
-                    runs[-1] = (o, size + FORMATS[fmt], fm + fmt, first, n + 1)
-                else:
-                    runs.append((off, FORMATS[fmt], fmt, k, 1))
             for p, v in zip((p for p, _ in fields), saved):
                 _set(msg, p, v)
-            t = cls(serialize(msg), [(o, struct.Struct("<" + fm), first, n)
-                                     for o, _, fm, first, n in runs])
+            t = cls(serialize(msg), fields, offsets)
             rng = random.Random(12345)
             for _ in range(checks):               # byte-identical to the serializer, or refused
                 vals = [_random(fmt, rng) for _, fmt in fields]
@@ -112,16 +121,9 @@ class Template:
             if i < 0 or data.find(b, i + 1) >= 0:
                 return None
             out.append(i)
-        if out != sorted(out):
-            return None
+        if any(b < a + FORMATS[f] for a, b, (_, f) in zip(out, out[1:], fields)):
+            return None                                 # out of order or overlapping
         return out
-
-    def pack(self, values: Sequence[Any]) -> bytes:
-        """The message's bytes with `values` in place."""
-        buf = bytearray(self._data)
-        for off, st, first, n in self._runs:
-            st.pack_into(buf, off, *values[first:first + n])
-        return bytes(buf)
 
 
 def stamp_fields(prefix: str = "header.stamp") -> list[tuple[str, str]]:
