@@ -34,6 +34,7 @@ from astrobee import rotations as rot
 DEFAULT_FPS = 10
 DEFAULT_SPEED = 4.0                    # sim seconds per video second
 MAX_FRAMES = 3000                      # a longer video is refused (5 min at 10 fps; a leg ~110)
+MAX_RESETS = 8                         # clock resets a recording's stamps may show (one a leg)
 MAX_COORD = 1000.0                     # m: a sample farther from the origin is dropped (the ISS
 # frame spans tens of metres; an exploded simulation's 1e7 m puts the robot's mesh, in the
 # renderer's float32, into screen-sized triangles next to the camera: >30 s a frame, measured)
@@ -104,22 +105,29 @@ def _stamp(h: Any) -> float:
 
 class _Timeline:
     """Maps (stamp, receive time) to one continuous time: the reference stamps plus an offset
-    that grows at every clock reset (a stamp jumping back)."""
+    that grows at every clock reset (a stamp jumping back). Stamps jumping back more often than
+    resets do (two clocks' samples interleaved: each jump added a whole leg, a 40-sample
+    window became 900 s of video) are not trusted: the receive time is the timeline then."""
 
     def __init__(self, log_ns: list[int], stamps: list[float]):
         order = np.argsort(np.asarray(log_ns), kind="stable")
         self.log = np.asarray(log_ns, float)[order]
         s = np.asarray(stamps, float)[order]
+        backs = s[1:] < s[:-1] - 1e-3
+        self.stamped = int(backs.sum()) <= max(MAX_RESETS, len(s) // 100)
+        if not self.stamped:
+            self.off = np.zeros(len(s))
+            self.cont = s[0] + (self.log - self.log[0]) * 1e-9
+            return
         off = np.zeros(len(s))
         for i in range(1, len(s)):
-            back = s[i] < s[i - 1] - 1e-3
             gap = (self.log[i] - self.log[i - 1]) * 1e-9
-            off[i] = off[i - 1] + ((s[i - 1] - s[i] + max(gap, 0.0)) if back else 0.0)
+            off[i] = off[i - 1] + ((s[i - 1] - s[i] + max(gap, 0.0)) if backs[i - 1] else 0.0)
         self.off, self.cont = off, s + off
 
     def of(self, log_ns: int, stamp: float | None = None) -> float:
         i = min(max(int(np.searchsorted(self.log, log_ns)) - 1, 0), len(self.log) - 1)
-        if stamp is None or stamp <= 0:
+        if stamp is None or stamp <= 0 or not self.stamped:
             return float(np.interp(log_ns, self.log, self.cont))
         return float(stamp + self.off[i])
 

@@ -22,20 +22,20 @@ T0_NS = 1_700_000_000_000_000_000
 POSE = "geometry_msgs/msg/PoseStamped"
 
 
-def write_poses(bag_dir, samples) -> None:
+def write_poses(bag_dir, samples, log_s=None) -> None:
     """A recording of /loc/truth/pose only: samples are (t, position, quaternion); logged at
-    T0_NS + t (receive time = sim time, as --use-sim-time records)."""
+    T0_NS + t (receive time = sim time, as --use-sim-time records) or at T0_NS + log_s[k]."""
     w = BagWriter(bag_dir)
     w.add_topic("/loc/truth/pose", POSE, typestore.message_definition(POSE),
                 typestore.type_hash(POSE), [QoSProfile(depth=10)])
     ser, PS = typestore.serializer(POSE), typestore.message_class(POSE)
-    for t, pos, q in samples:
+    for k, (t, pos, q) in enumerate(samples):
         m = PS()
         m.header.stamp.sec, m.header.stamp.nanosec = int(t), int(round((t - int(t)) * 1e9))
         m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in pos)
         o = m.pose.orientation
         o.x, o.y, o.z, o.w = (float(v) for v in q)
-        w.write("/loc/truth/pose", ser(m), T0_NS + int(t * 1e9))
+        w.write("/loc/truth/pose", ser(m), T0_NS + int((t if log_s is None else log_s[k]) * 1e9))
     w.close()
 
 
@@ -141,3 +141,18 @@ def test_the_launch_names_each_leg_left_without_a_video(tmp_path, capsys):
     cargo_transport._print_video_errors(tmp_path / "summary.json")
     assert capsys.readouterr().out.splitlines() == [
         "[video] b: not rendered: empty leg: wall-clock window 1.000-1.000"]
+
+
+def test_interleaved_clocks_do_not_stretch_the_timeline(tmp_path):
+    """Stamps of two clocks interleaved (each jump back was taken for a reset and added a whole
+    leg: 40 samples became 900 s of video) fall back to the receive time; a real reset (one
+    jump back) still continues the timeline."""
+    alternating = [(0.016 * k + (45.0 if k % 2 else 0.0), START, Q) for k in range(40)]
+    write_poses(tmp_path / "alt", alternating, log_s=[0.016 * k for k in range(40)])
+    rec = rb.read_recording(tmp_path / "alt")
+    assert rec.span[1] - rec.span[0] == pytest.approx(39 * 0.016), rec.span     # not 900 s
+    reset = [(45.0 + 0.016 * k, START, Q) for k in range(10)] + [(0.016 * k, START, Q)
+                                                                  for k in range(10)]
+    line = rb._Timeline([int(1e9 * 0.016 * k) for k in range(20)], [s[0] for s in reset])
+    assert line.stamped and np.all(np.diff(line.cont) > 0)
+    assert line.cont[-1] - line.cont[0] == pytest.approx(19 * 0.016, abs=0.02)
