@@ -274,12 +274,16 @@ class Simulation:
         return None if self.bag is None else self.bag.points()
 
     def bag_info(self) -> BagInfo | None:
-        """Model facts of the bag: FEM node count, or the number of rigid parts."""
+        """Model facts of the bag: FEM node count, or the number of rigid parts (fixed for a
+        bag: found once per bag, sim_node asks every tick)."""
         b = self.bag
         if b is None:
             return None
-        parts = len(b.points()) if b.model == "fem" else len(b.body_ids)
-        return BagInfo(b.model, b.variant, int(parts))
+        memo = self.__dict__.get("_bag_info")
+        if memo is None or memo[0] is not b:
+            parts = len(b.points()) if b.model == "fem" else len(b.body_ids)
+            memo = self._bag_info = (b, BagInfo(b.model, b.variant, int(parts)))
+        return memo[1]
 
     def contacts(self) -> list[Contact]:
         """Contacts of the robots and the bag with the station walls.
