@@ -24,21 +24,27 @@ where PD does: a bump on the bag spins robot + bag, and the flight mode's torque
 by the position loop's off-centre force, do not take the spin back before the segment ends).
 With the turning rollout model (robot + bag one rigid body, ReducedModel.turns) each decision
 also varies, per candidate:
-- the attitude reference: `attitude_share` of the candidates get a recovery profile instead of
-  the nominal attitude, q_ref(t) = q_nom(t) exp(delta(t)), delta a quintic (per body axis) from
-  the present attitude offset and offset rate to zero in Tc seconds; Tc is drawn between the
-  shortest recovery whose feed-forward torque I_c delta'' (I_c: the pair's inertia about its
-  centre of mass) stays within `torque_margin` of the flight mode's torque limits and 2.5x it.
-  So the PD tracks a torque-feasible recovery instead of saturating against a step;
 - the translation's progress (time scaling): a candidate follows the nominal at rate s in
   {1, (1 + time_scale_min)/2, time_scale_min} (0: pause), so the position loop stops asking
   for the off-centre force that turns the pair while the attitude is being recovered; the
-  segment's delay is booked (at most `max_delay` s: the task allows plan + settle + 10 s) and
-  the rest of the nominal is shifted by it.
+  delay is booked (at most `max_delay` s in all: the task allows plan + settle + 10 s) and the
+  rest of the nominal is shifted by it. At the segment's end a pair still turning or off the
+  final attitude is held at the goal one replan period more (the pause candidate, by rule,
+  within the same budget): the torque-limited attitude gets that time before the settle time;
+- the attitude reference: `attitude_share` of the candidates get a recovery profile instead of
+  the nominal attitude, q_ref(t) = q_nom(t) exp(delta(t)), delta a quintic (per body axis) from
+  the present attitude offset (at the nominal's rate: re-anchored each replan at the measured
+  rate it let a spin run on) to zero in Tc seconds; Tc is drawn between the shortest recovery
+  whose feed-forward torque I_c delta'' (I_c: the pair's inertia about its centre of mass)
+  stays within `torque_margin` of the flight mode's torque limits and 2.5x it; its position
+  reference is shifted by (R_nom - R_ref) c so the pair turns about its centre of mass.
 The cost adds, from the rollout's own attitude dynamics: the mean squared attitude error to
 the (time-scaled) nominal attitude (`w_attitude`), the squared angular momentum of the pair
-about its centre at the horizon's end (`w_momentum`) and the delay (`w_delay`, per s). Without a
-bag or with a model that does not turn, the decision is the translation-only one.
+about its centre at the horizon's end (`w_momentum`), the delay (`w_delay`, per s) and the
+collision weight for a candidate more than `max_deviation` from the nominal path; the nominal
+candidate is left only for `min_gain` less cost (the model is coarse: its choices among
+candidates it scores alike are noise). Without a bag or with a model that does not turn, the
+decision is the translation-only one. Measured (studies/mpc_attitude_study.yaml): see README.
 """
 from __future__ import annotations
 
@@ -62,6 +68,7 @@ from .reference import SampledTrajectory
 from .tracking import CONTROLLING, Step, Tracker
 
 MODELS = ("reduced", "pybullet")
+HOLD_OMEGA = 0.02    # rad/s: below it (and near the final attitude) the pair is not held longer
 _CUBE = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
@@ -93,6 +100,9 @@ class MpcConfig:
     w_attitude: float = 20.0         # per rad^2 of mean squared attitude error to the nominal
     w_momentum: float = 200.0        # per (N m s)^2 of the pair's angular momentum at the end
     w_delay: float = 0.5             # per s of translation delay over the horizon
+    max_deviation: float = 0.3       # m from the (time-scaled) nominal; beyond: w_collision
+    min_gain: float = 0.1            # leave the nominal candidate only for this share less cost
+    hold_about_centre: bool = False  # the end-of-segment hold lets the pair turn about its centre
 
     def validate(self) -> "MpcConfig":
         """Raise ValueError (one line) for a value the MPC cannot run with."""
@@ -116,12 +126,13 @@ class MpcConfig:
                 if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                     raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
         for name, lo, hi in (("attitude_share", 0.0, 1.0), ("torque_margin", 1e-3, 1.0),
+                             ("max_deviation", 0.0, 10.0), ("min_gain", 0.0, 1.0),
                              ("time_scale_min", 0.0, 1.0), ("max_delay", 0.0, 60.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}")
         self.samples, self.cost_stride = int(self.samples), int(self.cost_stride)
-        self.attitude = bool(self.attitude)
+        self.attitude, self.hold_about_centre = bool(self.attitude), bool(self.hold_about_centre)
         return self
 
     @classmethod
@@ -169,6 +180,9 @@ class MpcLaw:
         self._next_replan = 0.0
         self._warm: np.ndarray | None = None   # (6,) previous best [dp, dv]
         self._delay = 0.0                      # s the translation lags the nominal (attitude mode)
+        self._goal = None                      # the final pose while held at the goal
+        self._hold_end = 0.0
+        self._centre = np.zeros(3)
 
     # ---- ControlLaw plumbing: the Tracker's state machine -------------------------------
     @property
@@ -211,6 +225,7 @@ class MpcLaw:
         self.nominal = traj
         self._warm = None
         self._delay = 0.0
+        self._goal = None
         self._next_replan = now
         self.tracker.follow(traj, now)
 
@@ -232,10 +247,55 @@ class MpcLaw:
             if decision is not None:
                 self.tracker.traj = decision.executed
                 self.last = decision
+        self._hold_at_goal(state, now, dt)
         step = self.tracker.update(state, now, dt)
         if decision is not None:
             step.candidates, step.chosen = decision.candidates, decision.chosen
         return step
+
+    def _hold_at_goal(self, state: State, now: float, dt: float) -> None:
+        """Attitude mode: the pause candidate at the segment's end. While the pair is still
+        turning or off the final attitude when the plan is about to end, hold the final pose
+        one replan period more (booked as delay, at most max_delay in all): the torque-limited
+        attitude gets that time before the Tracker's settle time starts (the MPC keeps
+        deciding meanwhile). With `hold_about_centre` (off: measured worse, see README) the
+        held position is instead where the robot is when the pair's centre of mass sits at the
+        goal's, re-aimed every tick, so the pair turns about its centre of mass (inertia I_c,
+        about half the pair's inertia about the robot) instead of about a pinned robot."""
+        c, traj = self.config, self.tracker.traj
+        if not (c.attitude and self.tracker.state == CONTROLLING and traj is not None
+                and self.nominal is not None and self.bag is not None):
+            self._goal = None
+            return
+        goal = traj.final()
+        ends = self._hold_end if (c.hold_about_centre and self._goal is not None) else \
+            traj.end_time
+        if now + dt >= ends and self._delay + c.replan_period <= c.max_delay + 1e-9:
+            off = rot.angle_between(state.orientation, goal.orientation)
+            if off > 0.5 * self.flight_mode.tolerance_att or \
+                    float(np.linalg.norm(state.omega)) > HOLD_OMEGA:
+                self._delay += c.replan_period
+                if not c.hold_about_centre:
+                    self.tracker.traj = _append_hold(traj, traj.end_time + c.replan_period)
+                    return
+                if self._goal is None:
+                    self._goal, self._hold_end = goal, traj.end_time
+                    d = self.rest_offset if self.rest_offset is not None else \
+                        getattr(self.model.handle, "rest_offset", np.zeros(3))
+                    self._centre = compound_inertia(self._start(state), d)[1]
+                self._hold_end += c.replan_period
+        if self._goal is None or not c.hold_about_centre or now >= self._hold_end:
+            return
+        goal = self._goal
+        R_now, R_goal = rot.to_matrix(state.orientation), rot.to_matrix(goal.orientation)
+        arm = R_now @ self._centre                                  # robot -> centre, world
+        p = goal.position + R_goal @ self._centre - arm
+        v = -np.cross(R_now @ np.asarray(state.omega, float), arm)
+        z = np.zeros(3)
+        self.tracker.traj = SampledTrajectory(
+            np.array([now, max(self._hold_end, now + 1e-3)]), np.stack([p, p]), np.stack([v, v]),
+            np.stack([z, z]), np.stack([goal.orientation, goal.orientation]), np.stack([z, z]),
+            np.stack([z, z]))
 
     # ---- the MPC proper --------------------------------------------------------------------
     def _perturbations(self, n: int, scale: float) -> np.ndarray:
@@ -335,8 +395,11 @@ class MpcLaw:
         costs, clearance, att_end = self._score_attitude(out, nom, tau[:, 1:], plan, start,
                                                          scales, T)
         best = int(np.argmin(costs))
-        if pscale[best] > 1e-6:
-            self._warm = dz[best] / pscale[best]
+        if costs[best] > (1.0 - c.min_gain) * costs[0]:
+            best = 0                     # not worth leaving the nominal (the model is coarse)
+        if pscale[best] > 1e-6:          # warm start, kept within 2 sigma (no random walk)
+            sig = np.r_[np.full(3, c.sigma_position), np.full(3, c.sigma_velocity)]
+            self._warm = np.clip(dz[best] / pscale[best], -2.0 * sig, 2.0 * sig)
         self._delay += (1.0 - scales[best]) * min(c.replan_period, T)
         stride = c.cost_stride
         executed = self._executed_attitude(pts[best], now, T, plan, best, tau_h[best])
@@ -366,9 +429,10 @@ class MpcLaw:
         # tracking against each candidate's own (time-scaled) nominal instead of candidate 0's
         p_nom0 = _interp(nom.t, nom.position, tau[0])
         p_nom = _interp(nom.t, nom.position, tau.ravel()).reshape(tau.shape + (3,))
+        dev = np.sum((out.robot_position - p_nom) ** 2, -1)
         costs = costs + c.w_track * (
-            np.mean(np.sum((out.robot_position - p_nom) ** 2, -1), axis=1)
-            - np.mean(np.sum((out.robot_position - p_nom0) ** 2, -1), axis=1))
+            np.mean(dev, axis=1) - np.mean(np.sum((out.robot_position - p_nom0) ** 2, -1), axis=1))
+        costs = costs + c.w_collision * (np.sqrt(dev.max(axis=1)) > c.max_deviation)
         sl = slice(c.cost_stride - 1, None, c.cost_stride)
         Rn = plan.nominal_rotation[:, 1:][:, sl]                       # (N, K, 3, 3)
         Rr = out.rotation[:, sl]
@@ -544,7 +608,9 @@ def attitude_candidates(nom: SampledTrajectory, tau: np.ndarray, t: np.ndarray, 
     R_now = rot.to_matrix(np.asarray(state.orientation, float))
     R0 = Rn[0, 0]
     e0 = _log_so3((R0.T @ R_now)[None])[0]                     # R_now = R0 exp(e0)
-    r0 = np.asarray(state.omega, float) - R_now.T @ w_nom[0, 0]
+    # the recovery leaves from the present attitude at the nominal's rate, not the present
+    # rate: re-anchored every replan at the measured rate, it would let a spin run on
+    r0 = np.zeros(3)
     k = int(round(config.attitude_share * n))
     first = max(2, n - k) if k > 0 else n
     Tc = np.full(n, np.inf)
@@ -586,6 +652,16 @@ def _interp(t: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
                     -1).reshape(at.shape + (values.shape[1],))
 
 
+def _append_hold(traj: SampledTrajectory, t_end: float) -> SampledTrajectory:
+    """`traj` followed by its final pose held (at rest) until t_end."""
+    final = traj.final()
+    z = np.zeros(3)
+    return SampledTrajectory(np.append(traj.t, t_end), np.vstack([traj.position, final.position]),
+                             np.vstack([traj.velocity, z]), np.vstack([traj.accel, z]),
+                             np.vstack([traj.orientation, final.orientation]),
+                             np.vstack([traj.omega, z]), np.vstack([traj.alpha, z]))
+
+
 def _bezier_states(points: np.ndarray, T: float, s: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities, accelerations (N, M, 3) of quintic Beziers (N, 6, 3) of duration
@@ -612,7 +688,8 @@ PARAMETERS = {**{k: _CFG[k] for k in ("samples", "horizon", "replan_period", "ro
                                       "w_clearance", "clearance_margin", "w_effort", "w_relvel",
                                       "seed", "attitude", "attitude_share", "torque_margin",
                                       "time_scale_min", "max_delay", "w_attitude", "w_momentum",
-                                      "w_delay")},
+                                      "w_delay", "max_deviation", "min_gain",
+                                      "hold_about_centre")},
               "model": "reduced", "handle": "fem", "pybullet_bag": "constraint", "workers": 2,
               "settle_time": 5.0}
 

@@ -15,6 +15,7 @@ from astrobee_control.pd import State
 from astrobee_control.reduced_model import (ReducedModel, RigidBodyParams, Rollouts,
                                             RolloutStart, compound_inertia)
 from astrobee_control.reference import rest_to_rest
+from astrobee_control.tracking import CONTROLLING
 
 Q = np.array([0.0, 0.0, -0.7071067811865476, 0.7071067811865476])   # facing -y (to the JEM)
 RIGID = RigidBodyParams([-0.484, -0.001, -0.064])                   # the FEM bag's turning pair
@@ -141,6 +142,49 @@ def test_time_scaling_books_the_delay_and_never_exceeds_max_delay():
         assert d.executed.end_time == pytest.approx(law.nominal.end_time + law._delay, abs=0.11) \
             or d.executed.end_time >= law.nominal.end_time
     assert np.all(np.diff(delays) >= 0)
+
+
+def test_at_the_segment_end_a_turning_pair_is_held_longer_within_max_delay():
+    law = _law(16, max_delay=2.0, replan_period=1.0)
+    law.follow(rest_to_rest(P0, P0 + [0.0, -0.1, 0.0], Q, Q, 3.0), 0.0)
+    state = _spun(0.4, 0.1)
+    _carry(law, state)
+    law._next_replan = 1e9                          # no decisions: the end-of-segment hold alone
+    end = law.tracker.traj.end_time
+    law.update(state, end - 0.01, 0.016)            # about to end, still turning: held 1 s more
+    assert law.tracker.traj.end_time == pytest.approx(end + 1.0) and law._delay == 1.0
+    np.testing.assert_allclose(law.tracker.traj.position[-1], P0 + [0.0, -0.1, 0.0], atol=1e-9)
+    law.update(state, end + 0.995, 0.016)
+    assert law.tracker.traj.end_time == pytest.approx(end + 2.0) and law._delay == 2.0
+    law.update(state, end + 1.995, 0.016)           # max_delay spent: the segment ends
+    assert law._delay == 2.0
+    law.update(state, end + 2.01, 0.016)
+    assert law.state != CONTROLLING
+    # at rest at the final attitude: not held
+    calm = _law(16)
+    calm.follow(rest_to_rest(P0, P0 + [0.0, -0.1, 0.0], Q, Q, 3.0), 0.0)
+    still = State(P0 + [0.0, -0.1, 0.0], np.zeros(3), Q, np.zeros(3))
+    _carry(calm, still)
+    calm._next_replan = 1e9
+    calm.update(still, calm.tracker.traj.end_time - 0.01, 0.016)
+    assert calm._delay == 0.0
+
+
+def test_the_hold_about_the_centre_of_mass_aims_where_the_centre_sits_at_the_goal():
+    law = _law(16, hold_about_centre=True)
+    law.follow(rest_to_rest(P0, P0 + [0.0, -0.1, 0.0], Q, Q, 3.0), 0.0)
+    state = _spun(0.4, 0.1)
+    _carry(law, state)
+    law._next_replan = 1e9
+    end = law.tracker.traj.end_time
+    law.update(state, end - 0.01, 0.016)
+    assert law._delay == 1.0
+    goal = P0 + [0.0, -0.1, 0.0]
+    c = law._centre
+    assert np.linalg.norm(c) > 0.15
+    want = goal + rot.rotate(Q, c) - rot.rotate(state.orientation, c)
+    np.testing.assert_allclose(law.tracker.traj.position[0], want, atol=1e-9)
+    assert rot.angle_between(law.tracker.traj.orientation[0], Q) < 1e-9
 
 
 def test_without_a_bag_the_attitude_mode_makes_the_translation_only_decision():
