@@ -611,7 +611,7 @@ class SimNode:
             pub.publish(tpl.pack(values))
             return
         for (path, _), v in zip(self._template_fields[key], values):
-            tick_wire._set(msg, path, v)
+            tick_wire.set_field(msg, path, v)
         pub.publish(msg)
 
     def publish_state(self) -> None:

@@ -1,9 +1,11 @@
 """The sim's per-tick messages as CDR bytes with their changing numbers rewritten in place.
 
 A tick's messages keep their layout from tick to tick (frame ids, child frame ids, the bag's
-model names and handle count do not change), so each is serialised once as a template and only
-its stamps, poses, velocities and clearances are packed into a copy with struct at offsets found
-once (each field set to a sentinel, serialised, located). A template is checked at build time
+model names and handle count do not change), so each is serialised once as a template whose
+offsets of the stamps, poses, velocities and clearances are found once (each field set to a
+sentinel, serialised, located); a tick is then one struct.pack of the whole message (~1 us
+against ~1-7 us for the generated serializer plus setting the fields on the message objects).
+A template is checked at build time
 against the real serializer on random values and refused (None: the caller serialises the
 message object as before) if a single byte differs, so the wire stays byte-identical.
 Transport-free: the serializer is passed in.
@@ -17,15 +19,17 @@ from typing import Any, Callable, Sequence
 FORMATS = {"d": 8, "i": 4, "I": 4, "?": 1}
 
 
-def _get(msg: Any, path: str) -> Any:
+def get_field(msg: Any, path: str) -> Any:
+    """The field at a dotted path ('pose.position.x', 'transforms.0.header'; digits index)."""
     for part in path.split("."):
         msg = msg[int(part)] if part.isdigit() else getattr(msg, part)
     return msg
 
 
-def _set(msg: Any, path: str, value: Any) -> None:
+def set_field(msg: Any, path: str, value: Any) -> None:
+    """Set the field at a dotted path (see get_field)."""
     head, _, last = path.rpartition(".")
-    obj = _get(msg, head) if head else msg
+    obj = get_field(msg, head) if head else msg
     if last.isdigit():
         obj[int(last)] = value
     else:
@@ -76,7 +80,7 @@ class Template:
         change, in wire order; a '?' field must follow a field of the list directly (bools of a
         fixed-length sequence: they are placed, not searched). `msg` is left as it was."""
         try:
-            saved = [_get(msg, p) for p, _ in fields]
+            saved = [get_field(msg, p) for p, _ in fields]
         except (AttributeError, IndexError, TypeError, ValueError):
             return None
         try:
@@ -84,13 +88,13 @@ class Template:
             if offsets is None:
                 return None
             for p, v in zip((p for p, _ in fields), saved):
-                _set(msg, p, v)
+                set_field(msg, p, v)
             t = cls(serialize(msg), fields, offsets)
             rng = random.Random(12345)
             for _ in range(checks):               # byte-identical to the serializer, or refused
                 vals = [_random(fmt, rng) for _, fmt in fields]
                 for (p, _), v in zip(fields, vals):
-                    _set(msg, p, v)
+                    set_field(msg, p, v)
                 if t.pack(vals) != serialize(msg):
                     return None
             return t
@@ -98,7 +102,7 @@ class Template:
             return None
         finally:
             for (p, _), v in zip(fields, saved):
-                _set(msg, p, v)
+                set_field(msg, p, v)
 
     @staticmethod
     def _locate(msg: Any, serialize: Callable[[Any], bytes],
@@ -106,7 +110,7 @@ class Template:
         """Offset of each field in the serialised message (None: a sentinel not found once)."""
         for k, (p, fmt) in enumerate(fields):
             if fmt != "?":
-                _set(msg, p, _sentinel(fmt, k))
+                set_field(msg, p, _sentinel(fmt, k))
         data = serialize(msg)
         out: list[int] = []
         for k, (p, fmt) in enumerate(fields):

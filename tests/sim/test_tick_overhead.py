@@ -129,7 +129,7 @@ def test_templates_are_byte_identical_to_the_serializer():
         for _ in range(50):
             vals = [tick_wire._random(f, rng) for _, f in fields]
             for (path, _), v in zip(fields, vals):
-                tick_wire._set(msg, path, v)
+                tick_wire.set_field(msg, path, v)
             assert tpl.pack(vals) == ser(msg)
 
 
