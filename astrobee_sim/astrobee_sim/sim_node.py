@@ -947,6 +947,8 @@ def build(argv: list[str]) -> SimNode:
                                  f"but bag_mass_told; use backend:=pybullet")
         backend = make_backend(opts.backend, sc, opts.seed, physics_rate=opts.physics_rate,
                                gui=opts.gui, drag=opts.drag, **kw)
+        from .world import min_sdf_kernel
+        min_sdf_kernel(load=True)        # the compiled clearance: ~0.4 s now, ~30 us a tick less
         return SimNode(node, backend, opts)
     except BaseException:
         if backend is not None:

@@ -6,13 +6,14 @@ cuts the hatches open where boxes overlap. Pure numpy here; `build_pybullet` add
 pybullet client as a few static multibodies (one collider per slab, all convex boxes).
 
 The smallest wall distance of a point set (the sim's clearance, every tick) is one numba loop
-over the candidate slabs of the points' grid cells when numba is installed (compiled on first
-use, cached on disk; ~1-3 us for a robot or a rigid bag's corners instead of ~10-25 us of numpy
-calls), the same arithmetic as the numpy path, so the same values.
+over the candidate slabs of the points' grid cells where numba is loaded (sim_node loads it;
+~1-3 us for a robot or a rigid bag's corners, ~55 us for 412 FEM nodes, instead of ~10 / ~23 /
+~120 us of numpy calls), the same arithmetic as the numpy path, so the same values.
 """
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,14 +45,18 @@ def _min_sdf_loop(p, boxes):  # pragma: no cover - compiled
     return best, bi
 
 
-_min_sdf = None      # the compiled loop; False: numba missing (numpy path)
+_min_sdf = None      # the compiled loop once loaded; False: numba missing (numpy path)
 
 
-def min_sdf_kernel():
-    """The compiled _min_sdf_loop (numba imported and the loop loaded on first use: numba costs
-    ~0.2-0.3 s to import, paid by the processes that query clearances only), None without numba."""
+def min_sdf_kernel(load: bool = False):
+    """The compiled _min_sdf_loop, or None (the numpy path, same values).
+
+    Loaded when numba is already imported in this process (the fast FEM solvers import it) or
+    when `load` (sim_node asks at start): importing numba and loading the cached loop cost
+    ~0.4 s wall (~0.6 s CPU) once per process, which the ~30 us a tick saved repays only after
+    ~10-15k ticks, so a process that does not use numba otherwise does not pay it by default."""
     global _min_sdf
-    if _min_sdf is None:
+    if _min_sdf is None and (load or "numba" in sys.modules):
         try:
             from numba import njit
         except ImportError:

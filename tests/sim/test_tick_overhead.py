@@ -29,7 +29,7 @@ def _point_sets(w, rng, n_sets):
 def test_compiled_clearance_equals_the_numpy_paths():
     """nearest() through the numba loop = brute force over every slab = the numpy path, exactly
     (same arithmetic), the index of the nearest point included."""
-    if world_mod.min_sdf_kernel() is None:
+    if world_mod.min_sdf_kernel(load=True) is None:
         pytest.skip("numba not installed: nearest() is the numpy path")
     w = station(0.25)
     rng = np.random.default_rng(5)
