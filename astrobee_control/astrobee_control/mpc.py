@@ -461,13 +461,7 @@ class MpcLaw:
         al = plan.alpha[best, idx]
         shift = (now + T) - tau_h
         tail = nom.t > tau_h + 1e-6
-        return SampledTrajectory(np.concatenate([t, nom.t[tail] + shift]),
-                                 np.concatenate([p, nom.position[tail]]),
-                                 np.concatenate([v, nom.velocity[tail]]),
-                                 np.concatenate([a, nom.accel[tail]]),
-                                 np.concatenate([q, nom.orientation[tail]]),
-                                 np.concatenate([w, nom.omega[tail]]),
-                                 np.concatenate([al, nom.alpha[tail]]))
+        return _joined((t, p, v, a, q, w, al), nom, tail, shift)
 
     def _start(self, state: State) -> RolloutStart:
         mass = self.tracker.robot_mass.mass
@@ -525,13 +519,21 @@ class MpcLaw:
         q = np.array([r.orientation for r in refs])
         w = np.array([r.omega for r in refs])
         al = np.array([r.alpha for r in refs])
-        return SampledTrajectory(np.concatenate([t, nom.t[tail]]),
-                                 np.concatenate([p, nom.position[tail]]),
-                                 np.concatenate([v, nom.velocity[tail]]),
-                                 np.concatenate([a, nom.accel[tail]]),
-                                 np.concatenate([q, nom.orientation[tail]]),
-                                 np.concatenate([w, nom.omega[tail]]),
-                                 np.concatenate([al, nom.alpha[tail]]))
+        return _joined((t, p, v, a, q, w, al), nom, tail)
+
+
+def _joined(head: tuple, nom: SampledTrajectory, tail: np.ndarray,
+            shift: float = 0.0) -> SampledTrajectory:
+    """The executed head (t, p, v, a, q, w, alpha) followed by the nominal's samples `tail`
+    (their times moved by `shift`)."""
+    t, p, v, a, q, w, al = head
+    return SampledTrajectory(np.concatenate([t, nom.t[tail] + shift]),
+                             np.concatenate([p, nom.position[tail]]),
+                             np.concatenate([v, nom.velocity[tail]]),
+                             np.concatenate([a, nom.accel[tail]]),
+                             np.concatenate([q, nom.orientation[tail]]),
+                             np.concatenate([w, nom.omega[tail]]),
+                             np.concatenate([al, nom.alpha[tail]]))
 
 
 @dataclass
