@@ -48,6 +48,26 @@ def wait_port(port: int, timeout: float = 10.0, host: str = "127.0.0.1") -> bool
     return False
 
 
+def wait_until(cond, timeout: float, period: float = 0.02) -> bool:
+    """Poll cond() until it holds or `timeout` seconds pass (bounded); its last value."""
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        time.sleep(period)
+    return bool(cond())
+
+
+def spin_until(node, cond, timeout: float, procs: Sequence[subprocess.Popen] = (),
+               period: float = 0.05) -> bool:
+    """Spin `node` until cond() holds or `timeout` seconds pass; a process of `procs` that
+    exited fails the test at once with the end of its stderr."""
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        for p in procs:
+            assert p.poll() is None, p.stderr.read()[-2000:]
+        node.spin_once(timeout_sec=period)
+    return bool(cond())
+
+
 def zenoh_env(port: int, domain_id: Optional[int] = None, base: Optional[Mapping[str, str]] = None) -> dict:
     """Environment for a node process talking to the router on 127.0.0.1:port."""
     env = dict(os.environ if base is None else base)

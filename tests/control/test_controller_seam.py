@@ -3,7 +3,6 @@ controller_node (router + sim_node + the law's node + this test: four processes)
 transport-free layers load no zenoh."""
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -84,16 +83,9 @@ def test_hold_law_runs_in_controller_node_through_the_graph(router_env):
         node.create_subscription("astrobee_msgs/msg/FamCommand", "/gnc/ctl/command",
                                  lambda m: commands.append(m.control_mode), 50)
 
-        def spin_until(cond, timeout):
-            end = time.monotonic() + timeout
-            while not cond() and time.monotonic() < end:
-                for p in (sim, ctl):
-                    assert p.poll() is None, p.stderr.read()[-2000:]
-                node.spin_once(timeout_sec=0.05)
-            return cond()
-
         # lockstep: the sim only advances on the hold law's commands
-        assert spin_until(lambda: poses and poses[-1][0] >= 3.0, 90.0), poses[-1:] or "no pose"
+        assert testing.spin_until(node, lambda: poses and poses[-1][0] >= 3.0, 90.0, (sim, ctl)), \
+            poses[-1:] or "no pose"
         start = poses[0][1]
         assert float(np.linalg.norm(poses[-1][1] - start)) < 0.01
         assert commands and all(c == 1 for c in commands[-10:])       # MODE_STOP: holding
@@ -109,9 +101,10 @@ def test_hold_law_runs_in_controller_node_through_the_graph(router_env):
         mc.set_stamp(seg.header.stamp, poses[-1][0])
         pub = node.create_publisher("astrobee_msgs/msg/Segment", "/gnc/ctl/segment", roszen.LATCHED)
         pub.publish(seg)
-        assert spin_until(lambda: any("REFUSED" in s[2] or "refused" in s[2] for s in states), 30.0), states
+        assert testing.spin_until(node, lambda: any("REFUSED" in s[2] or "refused" in s[2] for s in states), 30.0,
+                                  (sim, ctl)), states
         t_seg = poses[-1][0]
-        assert spin_until(lambda: poses[-1][0] >= t_seg + 2.0, 60.0)
+        assert testing.spin_until(node, lambda: poses[-1][0] >= t_seg + 2.0, 60.0, (sim, ctl))
         assert float(np.linalg.norm(poses[-1][1] - start)) < 0.01
     finally:
         for p in (ctl, sim):

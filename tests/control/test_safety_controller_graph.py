@@ -2,7 +2,6 @@
 backend, lockstep) + the controller, whose segment is aimed through the nearest wall; the
 CBF filter inside the controller's process stops the robot short of the wall and publishes its
 latched diagnostics on /gnc/ctl/safety (no safety_filter_node, no command_nominal topic)."""
-import time
 
 import numpy as np
 import pytest
@@ -67,20 +66,12 @@ def test_controller_with_safety_stops_short_of_the_wall(router_env):
         seg_pub = node.create_publisher("astrobee_msgs/msg/Segment", "/" + mc.SEGMENT,
                                         roszen.LATCHED)
 
-        def spin_until(cond, timeout):
-            end = time.monotonic() + timeout
-            while not cond() and time.monotonic() < end:
-                for p in procs:
-                    assert p.poll() is None, p.stderr.read()[-2000:]
-                node.spin_once(timeout_sec=0.05)
-            return cond()
-
-        assert spin_until(lambda: commands and states and states[-1][0] >= 0.5, 180.0), \
+        assert testing.spin_until(node, lambda: commands and states and states[-1][0] >= 0.5, 180.0, procs), \
             "the controller never closed the loop"
         t0 = states[-1][0] + 0.5
         q = np.array([0.0, 0.0, -np.sqrt(0.5), np.sqrt(0.5)])
         seg_pub.publish(segment_msg(roszen, rest_to_rest(START, THROUGH_WALL, q, q, 8.0), t0))
-        assert spin_until(lambda: states[-1][0] >= t0 + 14.0, 240.0), states[-1][0]
+        assert testing.spin_until(node, lambda: states[-1][0] >= t0 + 14.0, 240.0, procs), states[-1][0]
         # nobody publishes the nominal topic: the filter is inside the controller
         assert not node.get_publishers_info_by_topic("/gnc/ctl/command_nominal")
         assert contacts and not any(c for c, _ in contacts), "the robot touched a wall"

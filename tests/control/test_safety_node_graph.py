@@ -1,7 +1,6 @@
 """safety_filter_node in the graph (issue 16): router + sim_node (lockstep) + safety_filter_node +
 this test acting as a broken controller commanding full thrust at the nearest wall; the filter
 keeps the robot off the wall and says it intervened."""
-import time
 
 import numpy as np
 import pytest
@@ -64,15 +63,8 @@ def test_full_thrust_at_a_wall_is_stopped_through_the_graph(router_env, body_axi
             lambda m: diags.append((m.status[0].level, {kv.key: kv.value for kv in m.status[0].values})),
             roszen.LATCHED)
 
-        def spin_until(cond, timeout):
-            end = time.monotonic() + timeout
-            while not cond() and time.monotonic() < end:
-                for p in procs:
-                    assert p.poll() is None, p.stderr.read()[-2000:]
-                node.spin_once(timeout_sec=0.05)
-            return cond()
-
-        assert spin_until(lambda: states and states[-1][0] >= 15.0, 240.0), states[-1:] or "no state"
+        assert testing.spin_until(node, lambda: states and states[-1][0] >= 15.0, 240.0, procs), \
+            states[-1:] or "no state"
         start = states[0][1]
         # the filter's output keeps the nominal command's stamp (the lockstep advanced on it)
         assert filtered and filtered[-1][2] == 2

@@ -9,19 +9,13 @@ import time
 import pytest
 
 import roszen
+from roszen import testing
 from roszen.bag import recorder as recorder_mod
 from roszen.bag.recorder import Recorder
 from roszen.bag.writer import BagWriter
 
 pytestmark = pytest.mark.graph
 POSE = "geometry_msgs/msg/PoseStamped"
-
-
-def _wait(cond, limit: float = 15.0) -> bool:
-    end = time.monotonic() + limit
-    while not cond() and time.monotonic() < end:
-        time.sleep(0.02)
-    return cond()
 
 
 @pytest.mark.parametrize("safety_net", [False, True], ids=["events_only", "periodic_look"])
@@ -61,7 +55,7 @@ def test_a_publisher_announced_during_the_first_look_is_recorded(router_env, tmp
         threads.append(threading.Thread(target=recorder.spin, args=(stop_rec,), daemon=True))
         for t in threads:
             t.start()
-        assert _wait(lambda: recorder.received >= 3), \
+        assert testing.wait_until(lambda: recorder.received >= 3, 15.0), \
             f"the late topic was not recorded (subscriptions: {sorted(recorder.subscriptions)})"
         assert "/late/pose" in recorder.subscriptions
         stop_rec.set()

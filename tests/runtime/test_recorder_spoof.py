@@ -9,19 +9,12 @@ import pytest
 import yaml
 
 import roszen
-from roszen import wire
+from roszen import testing, wire
 from roszen.bag.recorder import Recorder
 from roszen.bag.writer import BagWriter
 
 pytestmark = pytest.mark.graph
 POSE = "geometry_msgs/msg/PoseStamped"
-
-
-def _wait(cond, limit: float = 20.0) -> bool:
-    end = time.monotonic() + limit
-    while not cond() and time.monotonic() < end:
-        time.sleep(0.02)
-    return cond()
 
 
 def test_spoofed_type_tokens_do_not_hide_the_real_publisher(router_env, tmp_path, capsys):
@@ -59,7 +52,7 @@ def test_spoofed_type_tokens_do_not_hide_the_real_publisher(router_env, tmp_path
         recorder = Recorder(node, writer)
         threads.append(threading.Thread(target=recorder.spin, args=(stop_rec,), daemon=True))
         threads[-1].start()
-        assert _wait(lambda: recorder.received >= 5), "nothing recorded from the real publisher"
+        assert testing.wait_until(lambda: recorder.received >= 5, 20.0), "nothing recorded from the real publisher"
         stop_rec.set()
         threads[-1].join(20)
         recorder.close()
