@@ -13,6 +13,15 @@ def module_waypoints() -> dict:
             if ss.contains(np.array(v, float))}
 
 
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """n unit vectors spread evenly over the sphere (the golden-angle spiral)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r = np.sqrt(1 - z * z)
+    phi = np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
 @pytest.fixture(scope="session")
 def safe():
     return boxes.safe_set()

@@ -6,7 +6,7 @@ import pytest
 from astrobee import flight_modes
 from astrobee import rotations as rot
 from astrobee_planning import bezier, boxes, planner
-from conftest import module_waypoints
+from conftest import fibonacci_sphere, module_waypoints
 
 WPS = module_waypoints()
 PAIRS = list(itertools.combinations(sorted(WPS), 2))
@@ -14,15 +14,7 @@ Q0 = rot.from_euler(0.0, 0.0, 0.3)
 Q1 = rot.from_euler(0.1, -0.2, 2.0)
 
 
-def _fibonacci_sphere(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r = np.sqrt(1 - z * z)
-    phi = np.pi * (1 + 5 ** 0.5) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-SPHERE = np.vstack([_fibonacci_sphere(60), np.eye(3), -np.eye(3)])
+SPHERE = np.vstack([fibonacci_sphere(60), np.eye(3), -np.eye(3)])
 
 
 def _robot_inside_keep_in(pos: np.ndarray) -> np.ndarray:

@@ -11,22 +11,14 @@ import pytest
 
 from astrobee import rotations as rot
 from astrobee_planning import boxes, planner
-from conftest import module_waypoints
+from conftest import fibonacci_sphere, module_waypoints
 
 WPS = module_waypoints()
 ORDERED = list(itertools.permutations(sorted(WPS), 2))
 SPACING = 0.02     # m between samples along the path
 
 
-def _fibonacci_sphere(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r = np.sqrt(1 - z * z)
-    phi = np.pi * (1 + 5 ** 0.5) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-SURFACE = np.vstack([_fibonacci_sphere(116), np.eye(3), -np.eye(3)])
+SURFACE = np.vstack([fibonacci_sphere(116), np.eye(3), -np.eye(3)])
 
 
 @pytest.fixture(scope="module")
