@@ -25,14 +25,19 @@ ARM_MASSES = {"proximal": 0.30, "distal": 0.20, "gripper": 0.15, "finger": 0.02}
 MAX_ABS_WRENCH = 100.0   # N or N m: anything larger is a bad command, not a saturation
 
 
-def qrot(q, v) -> np.ndarray:
-    """Rotate one 3-vector by one quaternion [x,y,z,w] (plain floats: ~20x faster than numpy
-    for a single vector, and this runs several times per physics step)."""
+def qrot_floats(q, v) -> tuple[float, float, float]:
+    """Rotate one 3-vector by one quaternion [x,y,z,w], in plain floats (~20x faster than numpy
+    for a single vector; this runs several times per physics step and per published tick)."""
     x, y, z, w = q
     vx, vy, vz = v
     tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
-    return np.array([vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
-                     vz + w * tz + x * ty - y * tx])
+    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
+            vz + w * tz + x * ty - y * tx)
+
+
+def qrot(q, v) -> np.ndarray:
+    """qrot_floats as an array."""
+    return np.array(qrot_floats(q, v))
 
 
 def _box_inertia(m: float, size) -> list[float]:

@@ -68,6 +68,7 @@ from astrobee.scenario import Scenario, ScenarioError  # noqa: E402
 
 from . import markers, tick_wire  # noqa: E402
 from .backend import BACKENDS, SimBackend, make_backend  # noqa: E402
+from .robot import qrot_floats  # noqa: E402
 from .simulation import sim_defaults  # noqa: E402
 
 FAULT_WATCHDOG = 1
@@ -94,13 +95,8 @@ _CLOCK_FIELDS = tick_wire.stamp_fields("clock")
 
 
 def _to_body(q: Any, v: list) -> tuple[float, float, float]:
-    """A world vector in the body frame of q [x,y,z,w]: robot.qrot by the conjugate, same
-    arithmetic, as floats."""
-    x, y, z, w = -q[0], -q[1], -q[2], q[3]
-    vx, vy, vz = v
-    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
-    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
-            vz + w * tz + x * ty - y * tx)
+    """A world vector in the body frame of q [x,y,z,w] (rotated by the conjugate)."""
+    return qrot_floats((-q[0], -q[1], -q[2], q[3]), v)
 
 
 class ParameterError(ValueError):

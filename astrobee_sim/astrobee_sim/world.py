@@ -256,14 +256,14 @@ class World:
 
     def nearest(self, points: np.ndarray) -> tuple[float, int]:
         """Smallest signed wall distance over a point set and the index of that point (exact)."""
-        p = np.atleast_2d(np.asarray(points, dtype=float))
+        p = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
         kern = min_sdf_kernel()
         if len(p) == 1:                      # a robot: plain floats beat numpy's per-call cost
             q = p[0].tolist()
             k = [math.floor(c * (1.0 / FINE)) for c in q]
             cols, wl, _, _, sel = self._block(k, k, FINE)
             if kern is not None:
-                return float(kern(np.ascontiguousarray(p), sel)[0]), 0
+                return float(kern(p, sel)[0]), 0
             if len(wl) > 12:
                 return float(self._sdf_cols(p, cols).min()), 0
             sdf = self._sdf_one
@@ -280,12 +280,12 @@ class World:
                 gap = np.maximum(np.maximum(w_lo - hi, lo - w_hi), 0.0)
                 lb = np.einsum("ij,ij->i", gap, gap)          # squared, to the points' box
                 k = int(lb.argmin())
-                ub = (float(kern(np.ascontiguousarray(p), sel[k:k + 1])[0]) if kern is not None
+                ub = (float(kern(p, sel[k:k + 1])[0]) if kern is not None
                       else float(self._sdf_cols(p, [c[k:k + 1] for c in cols]).min()))
                 keep = lb <= (ub * ub * (1 + 1e-9) + 1e-18 if ub > 0 else 0.0)
                 cols, sel = [c[keep] for c in cols], sel[keep]
             if kern is not None:
-                best, i = kern(np.ascontiguousarray(p), sel)
+                best, i = kern(p, sel)
                 return float(best), int(i)
             d = self._sdf_cols(p, cols).min(axis=1)
         i = int(d.argmin())
