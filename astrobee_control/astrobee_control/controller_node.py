@@ -269,13 +269,19 @@ class ControllerNode:
         self.candidates_period = 1.0 / rate if rate > 0 else float("inf")
 
     # ---- peers ------------------------------------------------------------------------
-    def _watch_peers(self) -> None:
-        """Wall-clock check: the state's publishers still in the graph, the last state recent."""
+    def _note_state_publishers(self) -> list[str]:
+        """The state topic's publishers now (other nodes), remembered while there are any: a
+        publisher lost later is named by them."""
         pubs = sorted({e.node_fqn for e in self.node.get_publishers_info_by_topic(self.state_topic)
                        if e.node_fqn != self.node.get_fully_qualified_name()})
         if pubs:
             self._state_publishers = pubs
             self._unpublished_since = None
+        return pubs
+
+    def _watch_peers(self) -> None:
+        """Wall-clock check: the state's publishers still in the graph, the last state recent."""
+        pubs = self._note_state_publishers()
         if self._last_state_wall is None or self._gone:
             return
         who = ", ".join(n.lstrip("/") for n in self._state_publishers) or "its publisher"
@@ -427,6 +433,8 @@ class ControllerNode:
             return
         state.orientation = rot.normalize(state.orientation)
         self._last_state_wall = time.monotonic()
+        if not self._state_publishers:       # the first states: name their publisher now (a sim
+            self._note_state_publishers()    # killed before the next graph check stays named)
         if self._lost:
             self._state_back(state)
         t = mc.stamp_s(stamp)
