@@ -280,9 +280,7 @@ class MpcLaw:
                     return
                 if self._goal is None:
                     self._goal, self._hold_end = goal, traj.end_time
-                    d = self.rest_offset if self.rest_offset is not None else \
-                        getattr(self.model.handle, "rest_offset", np.zeros(3))
-                    self._centre = compound_inertia(self._start(state), d)[1]
+                    self._centre = compound_inertia(self._start(state), self._handle_offset())[1]
                 self._hold_end += c.replan_period
         if self._goal is None or not c.hold_about_centre or now >= self._hold_end:
             return
@@ -348,6 +346,12 @@ class MpcLaw:
         return Decision(now, p1, costs, clearance, best, out.robot_position[:, ::stride],
                         out.robot_position[best, ::stride], executed)
 
+    def _handle_offset(self) -> np.ndarray:
+        """The bag's rest offset from the gripper: the controller's, else the rollout model's."""
+        if self.rest_offset is not None:
+            return self.rest_offset
+        return getattr(self.model.handle, "rest_offset", np.zeros(3))
+
     def _turns(self, state: State) -> bool:
         """The rollout model integrates robot + bag attitude (attitude mode applies)."""
         turns = getattr(self.model, "turns", None)
@@ -381,8 +385,7 @@ class MpcLaw:
                              scales[:, None] ** 2 * a_h, T)
         ref_p, ref_v, ref_a = _bezier_states(pts, T, np.arange(m) / m)
         start = self._start(state)
-        I_c, centre = compound_inertia(start, self.rest_offset if self.rest_offset is not None
-                                       else getattr(self.model.handle, "rest_offset", np.zeros(3)))
+        I_c, centre = compound_inertia(start, self._handle_offset())
         plan = attitude_candidates(nom, tau, times - now, state, scales, I_c,
                                    np.asarray(self.flight_mode.max_torque, float), c,
                                    self.rng, n, centre)
@@ -540,17 +543,32 @@ def _joined(head: tuple, nom: SampledTrajectory, tail: np.ndarray,
 class AttitudePlan:
     """Per-candidate attitude references on the rollout grid (m+1 points): body -> world
     rotations, world-frame rate and acceleration; the time-scaled nominal's rotations; each
-    candidate's recovery time (inf: nominal attitude) and peak feed-forward torque (N m)."""
+    candidate's recovery time (inf: nominal attitude); the recovery's start offset and rate
+    and the pair's inertia, from which `peak_torque` is derived on demand (not per decision)."""
 
     rotation: np.ndarray          # (N, m+1, 3, 3)
     omega: np.ndarray             # (N, m+1, 3) rad/s, world
     alpha: np.ndarray             # (N, m+1, 3) rad/s^2, world
     nominal_rotation: np.ndarray  # (N, m+1, 3, 3)
     recovery_time: np.ndarray     # (N,) s
-    peak_torque: np.ndarray       # (N, 3) N m, body axes
     shift: np.ndarray             # (N, m+1, 3) m, position reference shift (world)
     shift_velocity: np.ndarray    # (N, m+1, 3)
     shift_accel: np.ndarray       # (N, m+1, 3)
+    offset: np.ndarray            # (3,) rad, the present attitude offset to the nominal
+    offset_rate: np.ndarray       # (3,) rad/s, the recovery's starting rate
+    inertia: np.ndarray           # (3, 3) kg m^2, the pair about its centre of mass
+
+    @property
+    def peak_torque(self) -> np.ndarray:
+        """(N, 3) N m, body axes: each recovery's peak feed-forward torque I delta'' (0 for the
+        candidates that keep the nominal attitude)."""
+        peak = np.zeros((len(self.recovery_time), 3))
+        grid = np.linspace(0.0, 1.0, 21)
+        for i in np.flatnonzero(np.isfinite(self.recovery_time)):
+            Tc = self.recovery_time[i:i + 1]
+            _, _, ap = recovery_profile(self.offset, self.offset_rate, Tc, grid * Tc[0])
+            peak[i] = np.abs(ap[0] @ np.asarray(self.inertia).T).max(axis=0)
+        return peak
 
 
 RECOVERY_TIMES = np.geomspace(0.5, 40.0, 24)   # s, the recovery durations tried
@@ -601,7 +619,7 @@ def attitude_candidates(nom: SampledTrajectory, tau: np.ndarray, t: np.ndarray, 
     pair's centre of mass, body; `centre`): the pair turns about its centre of mass, where the
     position loop does not fight the turn with an off-centre force (blended in from zero at
     the start, where the candidate leaves from the robot's present position)."""
-    q_nom = np.stack([np.interp(tau.ravel(), nom.t, nom.orientation[:, k]) for k in range(4)], -1)
+    q_nom = _interp(nom.t, nom.orientation, tau.ravel())
     Rn = rot.to_matrix(q_nom / np.linalg.norm(q_nom, axis=-1, keepdims=True)).reshape(
         tau.shape + (3, 3))
     w_nom = _interp(nom.t, nom.omega, tau.ravel()).reshape(tau.shape + (3,)) * scales[:, None, None]
@@ -616,7 +634,6 @@ def attitude_candidates(nom: SampledTrajectory, tau: np.ndarray, t: np.ndarray, 
     k = int(round(config.attitude_share * n))
     first = max(2, n - k) if k > 0 else n
     Tc = np.full(n, np.inf)
-    peak = np.zeros((n, 3))
     rotation, omega, alpha = Rn.copy(), w_nom.copy(), a_nom.copy()
     if first < n:
         T0 = shortest_recovery(e0, r0, inertia, max_torque, config.torque_margin)
@@ -625,10 +642,6 @@ def attitude_candidates(nom: SampledTrajectory, tau: np.ndarray, t: np.ndarray, 
         Tc[1] = T0 * 1.25
         sel = np.r_[1, np.arange(first, n)]
         x, v, a = recovery_profile(e0, r0, Tc[sel], t)
-        grid = np.linspace(0.0, 1.0, 21)
-        for j, i in enumerate(sel):
-            _, _, ap = recovery_profile(e0, r0, Tc[i:i + 1], grid * Tc[i])
-            peak[i] = np.abs(ap[0] @ np.asarray(inertia).T).max(axis=0)
         E = _exp_so3(x.reshape(-1, 3)).reshape(x.shape + (3,))
         rotation[sel] = Rn[sel] @ E
         omega[sel] = w_nom[sel] + np.einsum("nmij,nmj->nmi", rotation[sel], v)
@@ -642,8 +655,8 @@ def attitude_candidates(nom: SampledTrajectory, tau: np.ndarray, t: np.ndarray, 
         shift = shift - shift[:, :1] * fade
     dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
     sv = np.gradient(shift, dt, axis=1)
-    return AttitudePlan(rotation, omega, alpha, Rn, Tc, peak, shift, sv,
-                        np.gradient(sv, dt, axis=1))
+    return AttitudePlan(rotation, omega, alpha, Rn, Tc, shift, sv, np.gradient(sv, dt, axis=1),
+                        e0, r0, np.asarray(inertia, float))
 
 
 def _interp(t: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
