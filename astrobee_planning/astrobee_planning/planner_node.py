@@ -40,7 +40,7 @@ class PlannerNode:
         self.default_mode = str(self.node.declare_parameter(
             "flight_mode", config.astrobee()["default_flight_mode"],
             runtime(lambda v: setattr(self, "default_mode", str(v)),
-                    validator=lambda v: flight_modes.get(str(v)))).value)
+                    choices=flight_modes.names())).value)
         self.current_mode: str | None = None
         self.ControlState = roszen.message_class("astrobee_msgs/msg/ControlState")
         self.BezierCurve = roszen.message_class("astrobee_msgs/msg/BezierCurve")

@@ -20,7 +20,8 @@ from .context import Context, get_default_context
 from .executor import Executor, _pending_interrupts, raise_pending
 from .log import Logger, severity_from_name
 from .names import apply_remap, expand_name, normalize_namespace, validate_node_name
-from .parameters import (InvalidParameterTypeException, Parameter, check_value,
+from .parameters import (InvalidParameterTypeException, InvalidParameterValueException, Parameter,
+                         check_value,
                          ParameterAlreadyDeclaredException, ParameterDescriptor,
                          ParameterImmutableException, ParameterNotDeclaredException, ParameterType,
                          SetParametersResult, coerce, infer_type)
@@ -544,6 +545,7 @@ class Node:
         self._params: dict = {}
         self._descriptors: dict = {}
         self._param_callbacks: list = []
+        self._param_lock = threading.RLock()   # a set from a service and one from code: one at a time
         self._allow_undeclared = allow_undeclared_parameters
         # overrides: files first (in order), then -p, then explicit overrides
         overrides: dict = {}
@@ -854,29 +856,43 @@ class Node:
         return p
 
     def set_parameters_atomically(self, parameters: list) -> SetParametersResult:
-        try:
-            checked = [self._validate(p) for p in parameters]
-        except Exception as e:
-            return SetParametersResult(False, str(e))
-        for cb in self._param_callbacks:
-            r = cb(checked)
-            if r is not None and not r.successful:
-                return r
-        for p in checked:
-            if p.type_ == ParameterType.NOT_SET and p.name in self._params:
-                del self._params[p.name]
-                continue
-            apply = getattr(self._descriptors.get(p.name), "on_change", None)
-            if apply is not None:    # applied at run time; a refusal keeps the old value
+        """Set all or none: every value is validated first; if one `on_change` then refuses,
+        those already applied get their old values back and nothing is stored."""
+        with self._param_lock:
+            try:
+                checked = [self._validate(p) for p in parameters]
+                if len({p.name for p in checked}) != len(checked):
+                    raise InvalidParameterValueException("a parameter is named twice")
+            except Exception as e:  # noqa: BLE001 - any refusal is a failed set, never a crash
+                return SetParametersResult(False, str(e))
+            for cb in self._param_callbacks:
+                r = cb(checked)
+                if r is not None and not r.successful:
+                    return r
+            applied: list = []
+            for p in checked:
+                apply = getattr(self._descriptors.get(p.name), "on_change", None)
+                if apply is None or p.type_ == ParameterType.NOT_SET:
+                    continue
                 try:
                     apply(p.value)
-                except Exception as e:  # a failing apply must not kill the node
+                except Exception as e:  # noqa: BLE001 - a failing apply must not kill the node
+                    for name, undo in reversed(applied):
+                        try:
+                            undo(self._params[name].value)
+                        except Exception as e2:  # noqa: BLE001
+                            self._logger.error(f"parameter {name!r}: restoring its value failed: {e2}")
                     return SetParametersResult(False, f"parameter {p.name!r} not applied: {e}")
-            self._params[p.name] = p
-            self._descriptors.setdefault(p.name, ParameterDescriptor(name=p.name, type=int(p.type_)))
-            if p.name == "use_sim_time":
-                self._set_sim_time(bool(p.value))
-        return SetParametersResult(True, "")
+                applied.append((p.name, apply))
+            for p in checked:
+                if p.type_ == ParameterType.NOT_SET and p.name in self._params:
+                    del self._params[p.name]
+                    continue
+                self._params[p.name] = p
+                self._descriptors.setdefault(p.name, ParameterDescriptor(name=p.name, type=int(p.type_)))
+                if p.name == "use_sim_time":
+                    self._set_sim_time(bool(p.value))
+            return SetParametersResult(True, "")
 
     def set_parameters(self, parameters: list) -> list:
         return [self.set_parameters_atomically([p]) for p in parameters]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 
 class ParameterType(enum.IntEnum):
@@ -135,10 +135,11 @@ class Parameter:
 @dataclass
 class ParameterDescriptor:
     """Mirror of rcl_interfaces/msg/ParameterDescriptor (a range is min_value..max_value,
-    inclusive; a non-finite value is outside every range), plus two roszen-only fields that
-    never go on the wire: `validator(value)` raises ValueError for a value the node refuses,
-    `on_change(value)` applies an accepted new value at run time (it may raise ValueError
-    too: the set then fails and the old value stays)."""
+    inclusive; a non-finite value is outside every range), plus roszen-only fields that never
+    go on the wire (additional_constraints says them in words): `choices` (the values allowed;
+    for an array, each element), `validator(value)` raises ValueError for a value the node
+    refuses, `on_change(value)` applies an accepted new value at run time (it may raise
+    ValueError too: the set then fails and the old value stays)."""
     name: str = ""
     type: int = 0
     description: str = ""
@@ -147,30 +148,50 @@ class ParameterDescriptor:
     dynamic_typing: bool = False
     min_value: Optional[float] = None
     max_value: Optional[float] = None
+    choices: Optional[tuple] = None
     validator: Optional[Callable[[Any], None]] = field(default=None, repr=False, compare=False)
     on_change: Optional[Callable[[Any], None]] = field(default=None, repr=False, compare=False)
 
 
-def read_only(description: str = "") -> ParameterDescriptor:
-    """A parameter read once at start: `param set` is refused."""
-    return ParameterDescriptor(description=description, read_only=True,
-                               additional_constraints="read-only: read at start")
+def _constraints(min_value: Optional[float], max_value: Optional[float],
+                 choices: Optional[Sequence[Any]], when: str, finite: bool = False) -> str:
+    """The additional_constraints text a descriptor shows in `param describe`."""
+    words = []
+    if finite or min_value is not None or max_value is not None:
+        words.append("finite")
+    if min_value is not None:
+        words.append(f">= {min_value:g}")
+    if max_value is not None:
+        words.append(f"<= {max_value:g}")
+    if choices is not None:
+        words.append("one of " + ", ".join(map(str, choices)))
+    return " and ".join(words) + ("; " if words else "") + when
+
+
+def read_only(description: str = "", *, min_value: Optional[float] = None,
+              max_value: Optional[float] = None, choices: Optional[Sequence[Any]] = None,
+              validator: Optional[Callable[[Any], None]] = None) -> ParameterDescriptor:
+    """A parameter read once at start (`param set` is refused); its start value (default,
+    YAML or --ros-args) must be within [min_value, max_value], one of `choices` and accepted
+    by `validator`, or the node refuses to start."""
+    return ParameterDescriptor(description=description, read_only=True, min_value=min_value,
+                               max_value=max_value, validator=validator,
+                               choices=None if choices is None else tuple(choices),
+                               additional_constraints=_constraints(min_value, max_value, choices,
+                                                                   "read-only: read at start"))
 
 
 def runtime(apply: Callable[[Any], None], description: str = "", *,
             min_value: Optional[float] = None, max_value: Optional[float] = None,
+            choices: Optional[Sequence[Any]] = None,
             validator: Optional[Callable[[Any], None]] = None) -> ParameterDescriptor:
     """A parameter applied at run time by `apply(value)`; numbers must be finite and, when
-    given, within [min_value, max_value]; `validator` refuses other bad values."""
-    rng = []
-    if min_value is not None:
-        rng.append(f">= {min_value:g}")
-    if max_value is not None:
-        rng.append(f"<= {max_value:g}")
+    given, within [min_value, max_value] and one of `choices`; `validator` refuses other bad
+    values. The same checks hold for the start value."""
+    text = _constraints(min_value, max_value, choices, "applied at run time", finite=True)
     return ParameterDescriptor(description=description, min_value=min_value, max_value=max_value,
-                               validator=validator, on_change=apply,
-                               additional_constraints=" and ".join(["finite", *rng]
-                                                                   ) + "; applied at run time")
+                               choices=None if choices is None else tuple(choices),
+                               validator=validator, on_change=apply, additional_constraints=text)
 
 
 def _non_finite(value: Any) -> bool:
@@ -180,25 +201,38 @@ def _non_finite(value: Any) -> bool:
 
 def check_value(p: "Parameter", desc: ParameterDescriptor) -> None:
     """InvalidParameterValueException unless p's value is within the descriptor's range, finite
-    where the descriptor has a range or applies values at run time, and accepted by its
-    validator."""
+    where the descriptor has a range or applies values at run time, one of its choices and
+    accepted by its validator (any exception a validator raises is a refusal)."""
     if p.type_ == ParameterType.NOT_SET:
         return
     if (desc.on_change is not None or desc.min_value is not None or desc.max_value is not None) \
             and _non_finite(p.value):
         raise InvalidParameterValueException(f"parameter {p.name!r} must be finite, got {p.value!r}")
-    if p.type_ in (ParameterType.INTEGER, ParameterType.DOUBLE):
-        if desc.min_value is not None and p.value < desc.min_value:
+    vals = p.value if isinstance(p.value, list) else [p.value]
+    numeric = p.type_ in (ParameterType.INTEGER, ParameterType.DOUBLE, ParameterType.INTEGER_ARRAY,
+                          ParameterType.DOUBLE_ARRAY)
+    for v in vals if numeric else ():
+        if desc.min_value is not None and v < desc.min_value:
             raise InvalidParameterValueException(
-                f"parameter {p.name!r} must be >= {desc.min_value:g}, got {p.value!r}")
-        if desc.max_value is not None and p.value > desc.max_value:
+                f"parameter {p.name!r} must be >= {desc.min_value:g}, got {_short(p.value)}")
+        if desc.max_value is not None and v > desc.max_value:
             raise InvalidParameterValueException(
-                f"parameter {p.name!r} must be <= {desc.max_value:g}, got {p.value!r}")
+                f"parameter {p.name!r} must be <= {desc.max_value:g}, got {_short(p.value)}")
+    if desc.choices is not None and any(v not in desc.choices for v in vals):
+        raise InvalidParameterValueException(
+            f"parameter {p.name!r} must be one of {', '.join(map(str, desc.choices))}; "
+            f"got {_short(p.value)}")
     if desc.validator is not None:
         try:
             desc.validator(p.value)
-        except (ValueError, TypeError) as exc:
-            raise InvalidParameterValueException(f"parameter {p.name!r}: {exc}") from None
+        except Exception as exc:    # noqa: BLE001 - whatever a validator raises is a refusal
+            raise InvalidParameterValueException(f"parameter {p.name!r}: {_short(exc)}") from None
+
+
+def _short(x: Any, limit: int = 80) -> str:
+    """repr/str of x cut to `limit` characters (a flood of 'xxx...' must not flood the log)."""
+    s = str(x) if isinstance(x, BaseException) else repr(x)
+    return s if len(s) <= limit else s[:limit - 3] + "..."
 
 
 @dataclass
