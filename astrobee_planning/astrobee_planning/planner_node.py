@@ -68,8 +68,15 @@ class PlannerNode:
                       f"default flight mode {self.default_mode})")
 
     def _on_flight_mode(self, msg: Any) -> None:
-        if getattr(msg, "name", ""):
-            self.current_mode = str(msg.name)
+        name = str(getattr(msg, "name", ""))
+        if not name:
+            return
+        if name not in flight_modes.names():   # a stray publisher must not break every plan
+            if self.current_mode != name and not getattr(self, "_warned_mode", False):
+                self.log.warning(f"ignoring unknown flight mode {name[:40]!r} on /mob/flight_mode")
+                self._warned_mode = True
+            return
+        self.current_mode = name
 
     def _rate(self, requested: float) -> float:
         r = float(requested)
