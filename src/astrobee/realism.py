@@ -4,7 +4,8 @@ wrong bag mass told to the controller and a softer or stiffer bag. All off by de
 Transport-free and physics-free: this module only holds and validates the knobs (a frozen
 `Realism`, loaded from a scenario's `realism:` section, a preset of config/realism.yaml, a
 mapping or sim_node parameters); astrobee_sim.realism_effects applies them to a simulation.
-Bad values raise `astrobee.scenario.ScenarioError` with a one-line message naming the knob.
+Bad values raise `astrobee.errors.ScenarioError` (also astrobee.scenario's) with a one-line
+message naming the knob.
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from . import config
+from .errors import ScenarioError
 
 TARGETS = ("robot", "bag")
 PRESETS_FILE = "realism.yaml"
@@ -26,7 +28,6 @@ MAX_TIME = 1e6                       # s
 
 
 def _fail(message: str) -> None:
-    from .scenario import ScenarioError     # lazy: scenario imports this module
     raise ScenarioError(message)
 
 

@@ -8,7 +8,6 @@ own. Names are restricted to the scenario folder (no paths, no '..').
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -16,23 +15,13 @@ import numpy as np
 import yaml
 
 from . import config, flight_modes
+from .errors import ScenarioError
+from .overrides import (BAG_MODELS, FEM_SOLVERS, MASS_RANGE, MAX_ROBOTS, NO_BAG,  # noqa: F401
+                        OVERRIDE_KEYS, RESOLUTION_RANGE, Overrides, bag_variants,
+                        parse_overrides)
+from .overrides import NAME as _NAME
 from .realism import Realism
 from .realism import resolve as resolve_realism
-
-BAG_MODELS = ("fem", "constraint", "composite", "rigid")
-FEM_SOLVERS = ("bullet", "fast")
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_\-]{0,63}$")
-MAX_ROBOTS = 4
-RESOLUTION_RANGE = (27, 5000)          # FEM target node count accepted
-MASS_RANGE = (0.05, 100.0)             # kg
-
-
-class ScenarioError(ValueError):
-    """A scenario that does not exist or cannot be built; the message says which and why."""
-
-
-def bag_variants() -> tuple[str, ...]:
-    return tuple(config.bags()["handles"])
 
 
 def default_fem_solver() -> str:
@@ -126,15 +115,16 @@ class Scenario:
 
     # ---- loading --------------------------------------------------------------------------
     @classmethod
-    def load(cls, name: str, **overrides: Any) -> "Scenario":
-        """config/scenarios/<name>.yaml, validated, with launch/parameter overrides applied
-        (`realism=`: a preset name, a mapping of knobs or a Realism, replacing the file's)."""
+    def load(cls, name: str, overrides: Overrides | None = None, /, **keys: Any) -> "Scenario":
+        """config/scenarios/<name>.yaml, validated, with overrides applied (an Overrides or its
+        keys as keywords, see override(); `realism=`: a preset name, a mapping of knobs or a
+        Realism, replacing the file's)."""
         check_name(name)
         try:
             data = config.scenario(name)
         except config.ConfigError as exc:
             raise ScenarioError(str(exc)) from None
-        return cls.from_dict(data, name).override(**overrides)
+        return cls.from_dict(data, name).override(overrides, **keys)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], name: str = "custom") -> "Scenario":
@@ -195,58 +185,50 @@ class Scenario:
                    realism=resolve_realism(data.get("realism")),
                    extra={k: v for k, v in data.items() if k not in known})
 
-    def override(self, bag_model: str | None = None, bag_variant: str | None = None,
-                 bag_resolution: int | None = None, bag_mass: float | None = None,
-                 fem_solver: str | None = None, robots: list[str] | None = None,
-                 flight_mode: str | None = None, realism: Any = None) -> "Scenario":
-        """The scenario with launch/parameter overrides applied (empty/None: keep), validated.
+    def override(self, overrides: Overrides | None = None, /, **keys: Any) -> "Scenario":
+        """The scenario with overrides applied (an Overrides, or its keys as keywords:
+        astrobee.overrides.OVERRIDE_KEYS; None/empty: keep), validated.
 
         bag_model 'none' removes the bag; a bag model given to a scenario without a bag adds the
-        default bag (config/bags.yaml) with that model. realism (a preset name, a mapping of knobs
-        or a Realism; astrobee.realism) replaces the scenario's realism knobs."""
+        default bag (config/bags.yaml) with that model; bag keys without a bag are harmless.
+        realism (a preset name, a mapping of knobs or a Realism; astrobee.realism) replaces the
+        scenario's realism knobs. robots renames the robots (extra ones start 0.7 m apart)."""
+        unknown = sorted(set(keys) - set(OVERRIDE_KEYS))
+        if unknown or (overrides is not None and keys):
+            raise TypeError(f"override() takes an Overrides or the keywords {OVERRIDE_KEYS}, "
+                            f"got {unknown or sorted(keys)}")
+        ov = overrides if overrides is not None else parse_overrides(keys)
         sc = self
-        if realism is not None:
-            sc = replace(sc, realism=resolve_realism(realism))
-        if flight_mode:
-            try:
-                flight_modes.get(flight_mode)
-            except flight_modes.UnknownFlightMode as exc:
-                raise ScenarioError(str(exc)) from None
-            sc = replace(sc, flight_mode=flight_mode)
+        if ov.realism is not None:
+            sc = replace(sc, realism=resolve_realism(ov.realism))
+        if ov.flight_mode:
+            sc = replace(sc, flight_mode=ov.flight_mode)
         bag = sc.bag
-        if bag_model == "none":
+        if ov.bag_model == NO_BAG:
             bag = None
-        elif bag_model:
+        elif ov.bag_model:
             if bag is None:
                 d = config.bags()["default"]
                 bag = BagSpec(variant=str(d.get("variant", "front")), size=_vec(d["size"], 3, "bag size"),
                               mass=float(d["mass"]))
-            bag = replace(bag, model=bag_model)
+            bag = replace(bag, model=ov.bag_model)
         if bag is not None:
-            if bag_variant:
-                bag = replace(bag, variant=bag_variant)
-            if bag_resolution:
-                bag = replace(bag, resolution=int(bag_resolution))
-            if bag_mass:
-                bag = replace(bag, mass=float(bag_mass))
-            if fem_solver:
-                bag = replace(bag, solver=fem_solver)
+            if ov.bag_variant:
+                bag = replace(bag, variant=ov.bag_variant)
+            if ov.bag_resolution:
+                bag = replace(bag, resolution=ov.bag_resolution)
+            if ov.bag_mass:
+                bag = replace(bag, mass=ov.bag_mass)
+            if ov.fem_solver:
+                bag = replace(bag, solver=ov.fem_solver)
             bag.validate()
-        elif bag_variant or bag_resolution or bag_mass or fem_solver:
-            pass    # nothing to apply them to; harmless
         sc = replace(sc, bag=bag)
-        if robots:
-            names = [str(r).strip() for r in robots]
-            if len(names) > MAX_ROBOTS or len(set(names)) != len(names):
-                raise ScenarioError(f"robots must be 1..{MAX_ROBOTS} distinct names, got {names}")
-            for n in names:
-                if n and not _NAME.match(n):
-                    raise ScenarioError(f"robot name {n!r} is not a valid namespace")
+        if ov.robots:
             base = sc.robots[0]
             specs = [replace(sc.robots[i], name=n) if i < len(sc.robots) else
                      RobotSpec(n, tuple(float(x) for x in np.add(base.position, [0.7 * i, 0, 0])),
                                base.orientation)
-                     for i, n in enumerate(names)]
+                     for i, n in enumerate(ov.robots)]
             sc = replace(sc, robots=tuple(specs))
         return sc
 

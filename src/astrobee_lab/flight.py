@@ -25,6 +25,7 @@ import numpy as np
 
 from astrobee import config, flight_modes
 from astrobee import rotations as rot
+from astrobee.overrides import parse_overrides
 from astrobee.scenario import Scenario
 from astrobee.task import Task, TaskMonitor, TaskSample
 
@@ -32,8 +33,6 @@ CONTROL_RATE = 62.5        # Hz: the sim's publish rate, one command per state
 PLAN_SAMPLE_RATE = 10.0    # Hz: planner_node's default segment sampling
 FAULT_WATCH = 0.5          # s a faulted flight is watched before it ends (as the mission)
 CONTROLLERS = ("pd", "mpc")
-OVERRIDES = ("bag_model", "bag_variant", "bag_resolution", "bag_mass", "fem_solver",
-             "flight_mode")
 
 
 @dataclass
@@ -124,16 +123,14 @@ class Flight:
         task: keywords of Task.from_scenario (time_limit, end_on_contact, weights, goals...).
         plan: False flies no segment (the law holds the start pose; environments in wrench
         mode use the reference only for the observation)."""
-        overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
-                     "bag_resolution": bag_resolution, "bag_mass": bag_mass,
-                     "fem_solver": fem_solver, "flight_mode": flight_mode}
-        if realism is not None:
-            overrides["realism"] = realism
-        given = {k: v for k, v in overrides.items() if v is not None}
+        overrides = parse_overrides({"bag_model": bag_model, "bag_variant": bag_variant,
+                                     "bag_resolution": bag_resolution, "bag_mass": bag_mass,
+                                     "fem_solver": fem_solver, "flight_mode": flight_mode,
+                                     "realism": realism})
         if isinstance(scenario, Scenario):
-            self.scenario = scenario.override(**given) if given else scenario
+            self.scenario = overrides.apply(scenario)
         elif isinstance(scenario, str):
-            self.scenario = Scenario.load(scenario, **given)
+            self.scenario = Scenario.load(scenario, overrides)
         else:
             raise ValueError(f"scenario must be a name or a Scenario, got {type(scenario).__name__}")
         if len(self.scenario.robots) not in (1, 2):

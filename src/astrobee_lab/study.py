@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from .study_spec import FlightSpec, Study, StudyError, build_scenario, load_study
+from .study_spec import OVERRIDES, FlightSpec, Study, StudyError, build_scenario, load_study
 
 # columns of the table that measure the machine, not the flight (differ run to run)
 COST_COLUMNS = ("wall_time", "real_time_factor", "compute_ms_median", "compute_ms_p99",
@@ -146,8 +146,7 @@ def make_row(f: FlightSpec, record: dict, metrics: list[str] | None = None) -> d
     flown = dict(record.get("row") or {})
     row: dict[str, Any] = {"index": f.index, "key": f.key, "block": f.block, "label": f.label}
     row.update({k: _short(v) for k, v in f.swept.items()})
-    setup_keys = ("scenario", "bag_model", "bag_variant", "bag_mass", "bag_resolution",
-                  "fem_solver", "flight_mode", "safety", "realism", "state_source", "seed")
+    setup_keys = ("scenario", *OVERRIDES, "safety", "realism", "state_source", "seed")
     kept = dict(flown)
     kept["law"] = f.spec["controller"]
     kept["controller"] = f.label

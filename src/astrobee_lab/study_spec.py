@@ -41,15 +41,16 @@ from typing import Any
 import numpy as np
 import yaml
 
+from astrobee.overrides import OVERRIDE_KEYS, parse_overrides
+
 TOP_KEYS = {"name", "description", "controllers", "base", "seeds", "time_limit", "metrics",
             "blocks", "grid", "random", "set", "notes"}
 BLOCK_KEYS = {"name", "set", "grid", "random", "seeds", "description"}
-FLIGHT_KEYS = {"scenario", "controller", "safety", "bag_model", "bag_variant", "bag_resolution",
-               "bag_mass", "fem_solver", "flight_mode", "realism", "state_source", "time_limit",
-               "params"}
+# the scenario overrides a flight may set (astrobee.overrides; realism is kept apart in a spec)
+OVERRIDES = tuple(k for k in OVERRIDE_KEYS if k not in ("realism", "robots"))
+FLIGHT_KEYS = {"scenario", "controller", "safety", *OVERRIDES, "realism", "state_source",
+               "time_limit", "params"}
 DOTTED_ROOTS = {"realism", "params", "scenario"}
-OVERRIDES = ("bag_model", "bag_variant", "bag_resolution", "bag_mass", "fem_solver",
-             "flight_mode")
 CONTROLLER_KINDS = ("pd", "mpc")
 DISTRIBUTIONS = ("uniform", "loguniform", "choice", "randint")
 MAX_FLIGHTS = 100000
@@ -299,10 +300,8 @@ def build_scenario(spec: dict):
         base = Scenario.from_dict(sc, str(sc.get("name", "inline")))
     else:
         base = Scenario.load(sc)
-    ov = dict(spec.get("overrides") or {})
-    if spec.get("realism") is not None:
-        ov["realism"] = spec["realism"]
-    return base.override(**ov) if ov else base
+    return parse_overrides({**(spec.get("overrides") or {}), "realism": spec.get("realism")},
+                           source="study").apply(base)
 
 
 def _expand_block(block: dict, bi: int, base: dict, seeds: list[int], controllers: dict,

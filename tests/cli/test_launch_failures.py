@@ -45,12 +45,14 @@ def test_node_that_cannot_start_ends_the_launch_with_one_line(procs, port, tmp_p
 
 
 def test_real_sim_node_with_a_bad_parameter(procs, port, tmp_path):
-    """sim_node refusing a parameter: the launch's last line names it and the parameter."""
-    p = procs([ASTROBEE, "launch", "cargo_transport", "bag_mass:=-3", "mission:=false",
+    """sim_node refusing a parameter: the launch's last line names it and the parameter (a
+    value only sim_node checks: the scenario overrides, e.g. bag_mass:=-3, are refused by the
+    launcher before any process starts, see test_rejected_launch_leaves_no_run_folder)."""
+    p = procs([ASTROBEE, "launch", "cargo_transport", "lockstep_timeout:=5000", "mission:=false",
                "record:=false", "--port", str(port), "--run-dir", str(tmp_path / "run")],
               env=graph_env(port))
     assert p.wait(timeout=120) == 1
-    assert "error: 'sim_node' exited with code 1: sim_node: error: parameter bag_mass" \
+    assert "error: 'sim_node' exited with code 1: sim_node: error: parameter lockstep_timeout" \
         in p.lines[-1], p.lines[-8:]
     _no_traceback(p.lines + p.err)
 
@@ -91,6 +93,7 @@ def test_ctrl_c_during_the_launch_gives_no_traceback(procs, port, tmp_path):
     (["cargo_transport", "controller:=lqr"], "controller must be"),
     (["cargo_transport", "scenario:=no_such_place"], "unknown scenario"),
     (["cargo_transport", "lockstep_timeout:=-1"], "lockstep_timeout must be > 0"),
+    (["cargo_transport", "bag_mass:=-3"], "bag_mass must be 0.05..100 kg, got '-3'"),
     (["cargo_transport", "scenaro:=node2_to_jem"], "unknown launch argument scenaro"),
     (["cargo_transport", "--port", "abc"], "argument --port: invalid int value: 'abc'"),
 ])

@@ -38,6 +38,7 @@ import os
 from pathlib import Path
 
 from astrobee.config import load_yaml
+from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
 
@@ -87,19 +88,12 @@ def _number(ctx: LaunchContext, key: str, kind: type, what: str):
         raise LaunchError(f"{key} must be {what}, got '{ctx.arg(key)}'") from None
 
 
-def scenario_overrides(ctx: LaunchContext) -> dict:
-    """Launch arguments that change the scenario (validated by Scenario.override)."""
-    out: dict = {}
-    for key in ("bag_model", "bag_variant", "fem_solver", "flight_mode", "realism"):
-        if ctx.arg(key):
-            out[key] = ctx.arg(key)
-    if ctx.arg("bag_resolution"):
-        out["bag_resolution"] = _number(ctx, "bag_resolution", int, "a node count")
-    if ctx.arg("bag_mass"):
-        out["bag_mass"] = _number(ctx, "bag_mass", float, "a mass in kg")
-    if ctx.arg("robots"):
-        out["robots"] = [r.strip() for r in ctx.arg("robots").split(",")]
-    return out
+def scenario_overrides(ctx: LaunchContext) -> Overrides:
+    """Launch arguments that change the scenario (astrobee.overrides: one parser, one line)."""
+    try:
+        return parse_overrides({k: ctx.arg(k) for k in OVERRIDE_KEYS}, source="launch")
+    except ScenarioError as exc:
+        raise LaunchError(str(exc)) from None
 
 
 def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
@@ -126,7 +120,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     kinds: dict[str, str] = {}          # robot -> its controller (pd | mpc)
     for leg in legs:
         try:
-            built = Scenario.load(leg, **overrides)
+            built = Scenario.load(leg, overrides)
         except ScenarioError as exc:
             raise LaunchError(f"scenario {leg}: {exc}") from None
         names = list(built.robot_names)
@@ -156,8 +150,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         sim_params["seed"] = _number(ctx, "seed", int, "a non-negative integer")
         if sim_params["seed"] < 0:
             raise LaunchError("seed must be a non-negative integer")
-    for key, value in overrides.items():     # the sim builds the scenario with the overrides
-        sim_params[key] = ",".join(value) if isinstance(value, list) else value
+    sim_params.update(overrides.as_parameters())   # the sim builds the scenario with them
     mission = ctx.flag("mission", True)
     safety = SAFETY_MODES.get(ctx.arg("safety", SAFETY_DEFAULT).strip().lower())
     if safety is None:
