@@ -8,7 +8,12 @@ from .context import Context, get_default_context, init, ok, shutdown
 from .executor import (Executor, SingleThreadedExecutor, spin, spin_once,
                        spin_until_future_complete)
 from .log import Logger, LoggingSeverity, get_logger
-from .node import Client, Node, Publisher, Rate, Service, ServiceError, Subscription, Timer
+from .client import Client, ServiceError
+from .node import Node
+from .publisher import Publisher
+from .service import Service
+from .subscription import Subscription
+from .timer import Rate, Timer
 from .parameters import Parameter, ParameterDescriptor, ParameterType, SetParametersResult
 from .qos import (CLOCK, LATCHED, SENSOR_DATA, DEFAULT_DEPTH, Durability, DurabilityPolicy, History,
                   HistoryPolicy, Liveliness, QoSProfile, Reliability, ReliabilityPolicy,
