@@ -6,21 +6,31 @@ reference; `RigidSim` (rigid_backend.py, numpy only) is a light stand-in for gra
 controller and the mission. Both take a typed `astrobee.scenario.Scenario`, validate a reset
 request completely before they touch the running world, and apply the same per-axis flight-mode
 force clip and propulsion watchdog.
+
+This module is the protocol and what every backend shares (the contact and bag-info records,
+the seed and scenario checks, the simulator defaults); it imports no backend: `make_backend`
+finds the implementation by its module path in BACKENDS, so an implementation may import this
+module and never the other way round.
 """
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from astrobee import config
 from astrobee.flight_modes import FlightMode
 from astrobee.scenario import Scenario, ScenarioError
 
 from .bags.base import BagState
 from .world import World
 
-BACKENDS = ("pybullet", "rigid")
+# backend name -> "module:class" of its implementation (imported when asked for)
+_IMPLEMENTATIONS = {"pybullet": "astrobee_sim.simulation:Simulation",
+                    "rigid": "astrobee_sim.rigid_backend:RigidSim"}
+BACKENDS = tuple(_IMPLEMENTATIONS)
 MAX_SEED = 2**63 - 1          # Reset.srv carries an int64
 
 
@@ -42,6 +52,11 @@ class BagInfo:
     model: str
     variant: str
     nodes: int              # FEM nodes, or rigid parts of the reduced models
+
+
+def sim_defaults() -> dict:
+    """The `simulator:` section of config/astrobee.yaml (empty if absent)."""
+    return dict(config.astrobee().get("simulator") or {})
 
 
 def check_seed(seed: Any) -> int:
@@ -131,13 +146,10 @@ class SimBackend(Protocol):
 
 def make_backend(kind: str, scenario: str | Scenario, seed: int = 0, **kw: Any) -> SimBackend:
     """Build a backend by name ('pybullet' | 'rigid'); kw are the backend's keywords (overrides,
-    physics_rate, ...). The pybullet module is imported only for the pybullet backend."""
-    if kind == "pybullet":
-        from .simulation import Simulation
-        return Simulation(scenario, seed=seed, **kw)
-    if kind == "rigid":
-        from .rigid_backend import RigidSim
-        kw.pop("gui", None)
-        kw.pop("drag", None)
-        return RigidSim(scenario, seed=seed, **kw)
-    raise ValueError(f"unknown backend {kind!r}; known: {', '.join(BACKENDS)}")
+    physics_rate, gui, ...). Only the asked-for implementation is imported (pybullet for
+    'pybullet' alone)."""
+    where = _IMPLEMENTATIONS.get(kind)
+    if where is None:
+        raise ValueError(f"unknown backend {kind!r}; known: {', '.join(BACKENDS)}")
+    module, cls = where.split(":")
+    return getattr(importlib.import_module(module), cls)(scenario, seed=seed, **kw)

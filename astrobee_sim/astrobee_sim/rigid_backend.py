@@ -24,10 +24,10 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from astrobee.scenario import BagSpec, Scenario
 
-from .backend import BagInfo, Contact, check_seed, resolve_scenario
+from .backend import BagInfo, Contact, check_seed, resolve_scenario, sim_defaults
 from .bags.base import BagState, align
 from .robot import DISTAL_LEN, GRIPPER_LEN, MAX_ABS_WRENCH, PROXIMAL_LEN
-from .simulation import sim_defaults, station
+from .world import station
 
 _CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
 
@@ -140,7 +140,9 @@ class RigidSim:
                  bag_variant: str | None = None, bag_resolution: int | None = None,
                  robots: list[str] | None = None, flight_mode: str | None = None,
                  fem_solver: str | None = None, bag_mass: float | None = None,
-                 wall_thickness: float | None = None) -> None:
+                 wall_thickness: float | None = None, gui: bool = False,
+                 drag: bool = False) -> None:
+        """gui and drag are accepted as Simulation's and ignored (no viewer, no air drag)."""
         self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
                           "bag_resolution": bag_resolution, "bag_mass": bag_mass, "robots": robots,
                           "flight_mode": flight_mode, "fem_solver": fem_solver}

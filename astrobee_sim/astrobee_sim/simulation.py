@@ -25,32 +25,13 @@ from astrobee.realism import Realism
 from astrobee.realism import resolve as resolve_realism
 from astrobee.scenario import Scenario, ScenarioError
 
-from .backend import BagInfo, Contact, check_seed, resolve_scenario
+from .backend import BagInfo, Contact, check_seed, resolve_scenario, sim_defaults
 from .bags import Bag, BagState, make_bag
 from .realism_effects import RealismEffects, bag_params
 from .robot import Robot
-from .world import World, build_pybullet
+from .world import build_pybullet, station
 
 __all__ = ["Contact", "ScenarioError", "Simulation", "sim_defaults", "station"]
-
-
-_WORLD_CACHE: dict = {}
-
-
-def sim_defaults() -> dict:
-    """The `simulator:` section of config/astrobee.yaml (empty if absent)."""
-    return dict(config.astrobee().get("simulator") or {})
-
-
-def station(wall_thickness: float = 0.25) -> World:
-    """The procedural ISS geometry (cached per thickness: it only depends on config/iss.yaml).
-
-    The sim's walls are thicker than iss.yaml's 5 cm so a soft-body node pushed hard into a wall
-    (penetration up to a few cm measured) can never come out on the far side.
-    """
-    if wall_thickness not in _WORLD_CACHE:
-        _WORLD_CACHE[wall_thickness] = World.from_config(thickness=wall_thickness)
-    return _WORLD_CACHE[wall_thickness]
 
 
 class Simulation:

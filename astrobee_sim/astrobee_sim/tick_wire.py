@@ -8,6 +8,7 @@ against ~1-7 us for the generated serializer plus setting the fields on the mess
 A template is checked at build time
 against the real serializer on random values and refused (None: the caller serialises the
 message object as before) if a single byte differs, so the wire stays byte-identical.
+The other way, `decode_command` reads a FamCommand's stamp and wrench at their fixed offsets.
 Transport-free: the serializer is passed in.
 """
 from __future__ import annotations
@@ -140,3 +141,28 @@ def vec_fields(prefix: str) -> list[tuple[str, str]]:
 
 def pose_fields(prefix: str) -> list[tuple[str, str]]:
     return vec_fields(f"{prefix}.position") + [(f"{prefix}.orientation.{a}", "d") for a in "xyzw"]
+
+
+_CMD_HEAD = struct.Struct("<iiI")          # stamp sec, nanosec (read unsigned below), frame_id length
+_CMD_WRENCH = struct.Struct("<6d")
+_CMD_TAIL = 205     # bytes of a FamCommand from its wrench on (accel ... control_mode), CDR aligned
+
+
+def decode_command(data: bytes) -> tuple[int, tuple] | None:
+    """(stamp ns, body wrench) of a FamCommand in little-endian CDR, read at its fixed offsets
+    (~1 us instead of ~10 us for the whole message), or None when the bytes are not that plain
+    layout with a valid frame_id (the caller then decodes the whole message, which raises for
+    malformed bytes as before)."""
+    if len(data) < 16 + _CMD_TAIL or data[:4] != b"\x00\x01\x00\x00":
+        return None
+    sec, _, n = _CMD_HEAD.unpack_from(data, 4)
+    end = 16 + n                                   # after the frame_id's bytes and its NUL
+    off = 4 + ((end - 4 + 7) & ~7)                 # the wrench: 8-aligned after the 4-byte header
+    if n < 1 or len(data) != off + _CMD_TAIL or data[end - 1] != 0:
+        return None
+    try:
+        data[16:end - 1].decode()
+    except UnicodeDecodeError:
+        return None
+    nsec = int.from_bytes(data[8:12], "little")
+    return sec * 1_000_000_000 + nsec, _CMD_WRENCH.unpack_from(data, off)

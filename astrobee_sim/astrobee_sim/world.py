@@ -307,6 +307,20 @@ def module_colour(name: str) -> tuple[float, float, float]:
     return MODULE_COLOURS.get(name.split("/")[0], (0.8, 0.8, 0.8))
 
 
+_STATIONS: dict[float, World] = {}
+
+
+def station(wall_thickness: float = 0.25) -> World:
+    """The procedural ISS geometry (cached per thickness: it only depends on config/iss.yaml).
+
+    The sim's walls are thicker than iss.yaml's 5 cm so a soft-body node pushed hard into a wall
+    (penetration up to a few cm measured) can never come out on the far side.
+    """
+    if wall_thickness not in _STATIONS:
+        _STATIONS[wall_thickness] = World.from_config(thickness=wall_thickness)
+    return _STATIONS[wall_thickness]
+
+
 # pybullet 3.2.7's createCollisionShapeArray keeps the first 16 children of a compound and
 # silently drops the rest (MAX_COMPOUND_COLLISION_SHAPES in its C API): with 64 boxes a body,
 # 233 of the station's 426 slabs were missing and a robot flew out through Node 2's ceiling.

@@ -153,7 +153,7 @@ def test_a_template_that_cannot_be_located_is_refused():
 
 
 def test_command_decoded_in_place_equals_the_whole_message():
-    from astrobee_sim.sim_node import decode_command
+    from astrobee_sim.tick_wire import decode_command
     sup = codec.msg_support("astrobee_msgs/msg/FamCommand")
     rng = random.Random(0)
     for _ in range(500):
@@ -251,10 +251,10 @@ def test_sim_node_sends_the_bytes_the_message_objects_give(scenario, model, real
                 for k in range(900):              # up into the ceiling, then silence
                     if k < 840:
                         for n in s.names:
-                            s._command(n, s.now_ns(), [0.0, 0.0, 30.0, 0.0, 0.0, 0.0])
+                            s.commands.command(n, s.now_ns(), [0.0, 0.0, 30.0, 0.0, 0.0, 0.0])
                     s.run_tick()
-                assert s._templates and all((t is not None) == templates
-                                            for t in s._templates.values())
+                tpls = s.state._templates
+                assert tpls and all((t is not None) == templates for t in tpls.values())
             finally:
                 s.close()
         runs.append(node.out)
