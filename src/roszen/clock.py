@@ -144,3 +144,52 @@ class Clock:
 
     def sleep_for(self, d: Duration, timeout: Optional[float] = None) -> bool:
         return self.sleep_until(self.now() + d, timeout)
+
+
+class ClockSource:
+    """One /clock publisher per graph: the clock is the first publisher heard; samples of any
+    other are ignored (each such publisher logged once). When the adopted publisher has left
+    the graph (its liveliness token gone: a restarted sim), the next one heard is adopted.
+
+    A second /clock (a `bag play --clock` on a live graph, a stray `topic pub /clock`) would
+    otherwise interleave two time lines: every step back looks like a sim reset."""
+
+    def __init__(self, graph, topic: str = "/clock", log: Optional[Callable[[str], None]] = None) -> None:
+        self.graph = graph
+        self.topic = topic
+        self.log = log or (lambda text: None)
+        self.gid: Optional[bytes] = None
+        self._ignored: set = set()
+
+    def accept(self, gid: bytes) -> bool:
+        """True when a sample from publisher `gid` is this graph's clock (called per sample)."""
+        if gid == self.gid:
+            return True
+        if self.gid is not None and self._present(self.gid):
+            if gid not in self._ignored:
+                self._ignored.add(gid)
+                self.log(f"ignoring {self.topic} from publisher {gid.hex()} ({self._who(gid)}): this "
+                         f"graph's clock is {self.gid.hex()} ({self._who(self.gid)}); one clock per graph")
+            return False
+        if self.gid is not None:
+            self.log(f"{self.topic} publisher {self.gid.hex()} left the graph: the clock is now "
+                     f"{gid.hex()} ({self._who(gid)})")
+        self.gid = gid
+        self._ignored.discard(gid)
+        return True
+
+    def _entities(self) -> list:
+        try:
+            return list(self.graph.get_publishers_info_by_topic(self.topic))
+        except Exception:   # a graph being closed: keep the adopted clock
+            return []
+
+    def _present(self, gid: bytes) -> bool:
+        ents = self._entities()
+        return not ents or any(e.gid == gid for e in ents)
+
+    def _who(self, gid: bytes) -> str:
+        for e in self._entities():
+            if e.gid == gid:
+                return f"node {e.node_fqn}"
+        return "node unknown"

@@ -10,7 +10,7 @@ from typing import Any, Callable, Optional, Sequence
 from . import codec, wire
 from .args import load_params_file, parse_args
 from .client import Client, ServiceError
-from .clock import Clock
+from .clock import Clock, ClockSource
 from .context import Context, get_default_context
 from .endpoint import DEFAULT_MAX_BYTES, _max_bytes_default
 from .executor import Executor
@@ -425,9 +425,13 @@ class Node:
     # -- sim time -----------------------------------------------------------------------------
     def _set_sim_time(self, on: bool) -> None:
         if on and self._clock_sub is None:
-            def on_clock(msg) -> None:
-                self._clock.set_sim_time(int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec))
-            sub = Subscription(self, "rosgraph_msgs/msg/Clock", "/clock", on_clock, CLOCK, direct=True)
+            source = ClockSource(self.context.graph, log=self.get_logger().warn)
+
+            def on_clock(msg, gid: bytes) -> None:
+                if source.accept(gid):
+                    self._clock.set_sim_time(int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec))
+            sub = Subscription(self, "rosgraph_msgs/msg/Clock", "/clock", on_clock, CLOCK, direct=True,
+                               with_source=True)
             self._clock_sub = sub
         elif not on and self._clock_sub is not None:
             self._clock_sub.destroy()

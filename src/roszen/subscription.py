@@ -20,7 +20,8 @@ class Subscription(_Entity, _Endpoint):
     """Receives samples into a per-subscription buffer bounded like a DDS history."""
 
     def __init__(self, node: "Node", msg_type: str, topic: str, callback: Callable, qos: QoSProfile,
-                 raw: bool = False, direct: bool = False, max_bytes: Optional[int] = None) -> None:
+                 raw: bool = False, direct: bool = False, max_bytes: Optional[int] = None,
+                 with_source: bool = False) -> None:
         sup = codec.msg_support(msg_type)
         self.msg_type = sup.name
         self.topic_name = node.resolve_topic_name(topic)
@@ -28,6 +29,7 @@ class Subscription(_Entity, _Endpoint):
         self.callback = callback
         self.raw = raw
         self._direct = direct
+        self._with_source = with_source   # callback(msg, publisher GID): the /clock source policy
         self._deserialize = sup.deserialize
         self._buf: collections.deque = collections.deque(maxlen=None if qos.keep_all else qos.effective_depth)
         self.max_bytes = max_bytes if max_bytes is not None else _max_bytes_default()
@@ -98,7 +100,10 @@ class Subscription(_Entity, _Endpoint):
                 self._report_bad(ab, f"malformed CDR payload ({len(data)} bytes) for {self.msg_type}: {e}")
                 return
         try:
-            self.callback(msg)
+            if self._with_source:
+                self.callback(msg, ab[17:])
+            else:
+                self.callback(msg)
         except Exception:
             self.node.get_logger().error(
                 f"subscription callback for {self.topic_name} raised:\n{traceback.format_exc().rstrip()}")

@@ -40,13 +40,17 @@ class SimStamp:
     """Receive times on the sim clock (/clock), for a recording on sim time.
 
     The bag's time axis never runs backwards: when /clock restarts (a sim reset between the
-    legs of a demo) the stamps continue from the last one (the restart's 0 is the last stamp).
+    legs of a demo) the stamps continue from the last one (the restart's 0 is the last stamp),
+    and the reset is logged. Only one /clock publisher is followed (roszen.clock.ClockSource):
+    another one's samples are ignored and logged once, so a stray clock (`bag play --clock` on
+    a live graph) cannot interleave a second time line whose every step back would add a leg.
     Messages that arrive before the first /clock (latched ones) wait and get its time. If no
     /clock comes within `patience` wall seconds the recording falls back to wall-clock time."""
 
     def __init__(self, node, write, patience: float = 60.0, max_pending: int = 100_000):
-        from roszen.node import Subscription
+        from roszen.clock import ClockSource
         from roszen.qos import CLOCK
+        from roszen.subscription import Subscription
         self.write = write
         self._lock = threading.Lock()
         self.patience = patience
@@ -58,14 +62,21 @@ class SimStamp:
         self.pending: list = []  # (topic, data, wall ns) received before the first /clock
         # direct: the clock is read on arrival (zenoh's thread), as a node's own sim clock is, so
         # a message is never stamped with a /clock older than the one published before it
+        self.source = ClockSource(node.context.graph, log=log)
+        self.resets = 0
         self._sub = Subscription(node, "rosgraph_msgs/msg/Clock", "/clock", self._on_clock, CLOCK,
-                                 direct=True)
+                                 direct=True, with_source=True)
 
-    def _on_clock(self, msg) -> None:
+    def _on_clock(self, msg, gid: bytes) -> None:
+        if not self.source.accept(gid):
+            return
         t = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
         with self._lock:
             if self.last is not None and t < self.last:   # restarted (from 0): continue
                 self.offset += self.last
+                self.resets += 1
+                log(f"/clock went back from {self.last * 1e-9:.3f} s to {t * 1e-9:.3f} s (a sim reset): "
+                    f"the bag's time continues from {self.offset * 1e-9:.3f} s")
             self.last = t
             if self.pending and not self.wall:
                 now = self.last + self.offset
