@@ -35,6 +35,8 @@ def drawable(points) -> bool:
     a = np.asarray(points, float)
     return bool(np.all(np.isfinite(a)) and np.all(np.abs(a) <= MAX_COORD))
 
+# A box's 8 corners in rigid_base's order (index 4*ix + 2*iy + iz), for half-extents 1.
+CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 # Faces of a box whose 8 corners are ordered as rigid_base._CORNERS (index 4*ix + 2*iy + iz).
 BOX_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
                       [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
@@ -56,13 +58,23 @@ class Polyline:
 
 
 @dataclass
+class Spot:
+    """A filled circle over the picture at a world point (a contact flash), radius in pixels."""
+    point: np.ndarray
+    rgb: tuple[int, int, int] = (255, 30, 30)
+    radius: int = 7
+
+
+@dataclass
 class Scene:
     """Everything drawn in one frame (world frame, SI units)."""
     robots: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (pos, quat xyzw)
     arm_deployed: bool = False
     bag: Surface | None = None
     lines: list[Polyline] = field(default_factory=list)
+    spots: list[Spot] = field(default_factory=list)    # drawn on top, as the lines
     text: list[str] = field(default_factory=list)      # overlay lines, top left
+    text_rgb: list[tuple[int, int, int] | None] = field(default_factory=list)  # per line
 
 
 @dataclass
@@ -213,6 +225,7 @@ class Renderer:
         self._set_robots(scene.robots, scene.arm_deployed)
         self._set_bag(scene.bag)
         lines = [ln for ln in scene.lines if drawable(ln.points)]
+        spots = [sp for sp in scene.spots if drawable(sp.point)]
         if drawable(camera.eye) and drawable(camera.target) \
                 and np.linalg.norm(np.subtract(camera.target, camera.eye)) > 1e-9:
             view, proj = camera.matrices(width, height)
@@ -222,16 +235,21 @@ class Renderer:
                                    flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.client)
             rgb = np.asarray(img[2], dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
         else:                                   # nowhere to look from: a blank picture
-            rgb, lines = np.full((height, width, 3), 30, np.uint8), []
-        if not lines and not (draw_text and scene.text):
+            rgb, lines, spots = np.full((height, width, 3), 30, np.uint8), [], []
+        if not lines and not spots and not (draw_text and scene.text):
             return np.ascontiguousarray(rgb)
         im = Image.fromarray(np.ascontiguousarray(rgb))
         d = ImageDraw.Draw(im)
         for line in lines:
             for run in project(line.points, view, proj, width, height, camera.near):
                 d.line(run, fill=tuple(line.rgb), width=line.width)
+        for sp in spots:
+            for run in project(np.vstack([sp.point, sp.point]), view, proj, width, height,
+                               camera.near):
+                (u, v), r = run[0], sp.radius
+                d.ellipse([u - r, v - r, u + r, v + r], fill=tuple(sp.rgb), outline=(255, 255, 255))
         if draw_text and scene.text:
-            draw_text_box(d, scene.text, max(10, height // 28))
+            draw_text_box(d, scene.text, max(10, height // 28), colours=scene.text_rgb)
         return np.asarray(im)
 
     def close(self) -> None:
@@ -255,15 +273,17 @@ def _font(size: int):
     return f
 
 
-def draw_text_box(draw, lines: list[str], size: int, xy=(6, 6)) -> None:
-    """White text on a dark translucent-looking box (top left)."""
+def draw_text_box(draw, lines: list[str], size: int, xy=(6, 6),
+                  colours: list[tuple[int, int, int] | None] | None = None) -> None:
+    """Text (white, or the line's colour) on a dark box (top left)."""
     font = _font(size)
     x, y = xy
     widths = [draw.textlength(s, font=font) for s in lines]
     h = size + 4
     draw.rectangle([x - 4, y - 3, x + max(widths) + 6, y + h * len(lines) + 2], fill=(20, 20, 28))
     for k, s in enumerate(lines):
-        draw.text((x, y + k * h), s, fill=(255, 255, 255), font=font)
+        rgb = (colours[k] if colours and k < len(colours) else None) or (255, 255, 255)
+        draw.text((x, y + k * h), s, fill=tuple(rgb), font=font)
 
 
 # ---- cameras --------------------------------------------------------------------------
@@ -315,21 +335,27 @@ def overview_camera(points: np.ndarray, aspect: float = 1.0, fov: float = 50.0,
 
 
 class FlightRenderer:
-    """Chase view (left) and overview (right) of a scene side by side, with the text overlay:
-    the frame renderer of `astrobee bag render`. The overview uses a cutaway station."""
+    """Chase view and overview of a scene side by side (or the chase view above the overview:
+    `stacked`, a column of a comparison), with the text overlay: the frame renderer of
+    `astrobee bag render`. The overview uses a cutaway station."""
 
     def __init__(self, chase_size=(512, 384), overview_size=(384, 384),
-                 world: World | None = None):
+                 world: World | None = None, stacked: bool = False):
         self.world = world or World.from_config()
         self.chase_size, self.overview_size = tuple(chase_size), tuple(overview_size)
-        if self.chase_size[1] != self.overview_size[1]:
+        self.stacked = bool(stacked)
+        if not self.stacked and self.chase_size[1] != self.overview_size[1]:
             raise ValueError("chase and overview views must have the same height")
+        if self.stacked and self.chase_size[0] != self.overview_size[0]:
+            raise ValueError("stacked chase and overview views must have the same width")
         self.chase = Renderer(self.world)
         self.overview = Renderer(self.world, cutaway=True)
 
     @property
     def size(self) -> tuple[int, int]:
         """(width, height) of a composed frame."""
+        if self.stacked:
+            return self.chase_size[0], self.chase_size[1] + self.overview_size[1]
         return self.chase_size[0] + self.overview_size[0], self.chase_size[1]
 
     def render(self, scene: Scene, heading: np.ndarray | None, overview: Camera) -> np.ndarray:
@@ -341,8 +367,11 @@ class FlightRenderer:
             cam = Camera(eye=overview.eye, target=overview.target, up=overview.up)
         left = self.chase.render(scene, cam, cw, ch)
         right = self.overview.render(scene, overview, ow, oh, draw_text=False)
-        frame = np.concatenate([left, right], axis=1)
-        frame[:, cw:cw + 2] = 30                          # a thin divider
+        frame = np.concatenate([left, right], axis=0 if self.stacked else 1)
+        if self.stacked:
+            frame[ch:ch + 2, :] = 30                      # a thin divider
+        else:
+            frame[:, cw:cw + 2] = 30
         return frame
 
     def close(self) -> None:
