@@ -1,4 +1,5 @@
-"""The `astrobee` command: `run`, `launch`, `router` and the ros2-style verbs of roszen.cli.
+"""The `astrobee` command: the ros2-style verbs of roszen.cli plus astrobee's own (launch,
+study, bag render), all entry points (roszen.cli.registry); `astrobee -h` lists them.
 
     astrobee run astrobee_sim sim_node --ros-args -p scenario:=node2_to_jem
     astrobee launch cargo_transport [name:=value ...] [--port 7447]
@@ -9,19 +10,30 @@ from __future__ import annotations
 import sys
 
 from roszen.cli import main as roszen_main
-from roszen.cli.common import CliError, line_buffered
+from roszen.cli.common import CliError
+from roszen.cli.registry import Verb
+
+GROUPS = ("roszen.verbs", "astrobee.verbs")
+
+# the verbs with their own parsers; pyproject.toml's entry points name these objects
+LAUNCH = Verb("start a launch description (astrobee_bringup/launch/NAME.py): "
+              "launch NAME [arg:=value ...]", "astrobee_bringup.cli:launch_main")
+STUDY = Verb("Monte Carlo studies: study run FILE | report DIR | reflow DIR ROW",
+             "astrobee_lab.study_cli:main")
+RENDER = Verb("render a recorded run to MP4/GIF, headless: bag render BAG -o flight.mp4",
+              "astrobee_bringup.render_bag:main")
 
 
-USAGE = """usage: astrobee <command> [args]
-
-commands:
-  run PKG EXE [--ros-args ...]   start one node (like `ros2 run`)
-  launch NAME [arg:=value ...]   start a launch description (astrobee_bringup/launch/NAME.py)
-  router [--port P]              run the Zenoh router (rmw_zenohd equivalent)
-  topic | service | node | param | interface | bag   ros2-style verbs (`astrobee topic -h`)
-  bag render BAG -o flight.mp4   render a recorded run to MP4/GIF, headless
-  study run FILE | report DIR | reflow DIR ROW   Monte Carlo studies (`astrobee study -h`)
-"""
+def launch_main(argv: list[str]) -> int:
+    """`astrobee launch`: a bad argument is one line; Ctrl-C before the launcher took over the
+    signals exits 130."""
+    try:
+        return _launch(argv)
+    except CliError as exc:
+        print(f"astrobee launch: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
 
 
 def _launch(argv: list[str]) -> int:
@@ -87,26 +99,8 @@ def _launch(argv: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `astrobee` console command."""
-    line_buffered()
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print(USAGE, end="")
-        return 0 if argv else 2
-    if argv[0] == "launch":
-        try:
-            return _launch(argv[1:])
-        except CliError as exc:
-            print(f"astrobee launch: {exc}", file=sys.stderr)
-            return 1
-        except KeyboardInterrupt:      # Ctrl-C before the launcher took over the signals
-            return 130
-    if argv[0] == "study":
-        from astrobee_lab.study_cli import main as study_main
-        return study_main(argv[1:])
-    if argv[:2] == ["bag", "render"]:
-        from astrobee_bringup import render_bag
-        return render_bag.main(argv[2:])
-    return roszen_main(argv, prog="astrobee")
+    return roszen_main(argv, prog="astrobee", groups=GROUPS,
+                       description="Astrobee cargo transport: a ROS 2 (Jazzy) style node graph")
 
 
 if __name__ == "__main__":

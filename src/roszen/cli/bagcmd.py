@@ -11,10 +11,14 @@ from roszen.cli.common import CliError, positive_float
 
 
 def add_parser(sub) -> None:
+    """`bag`: its sub-verbs are the entry points of roszen.bag.verbs (record, play, info, ...)."""
+    from roszen.cli import registry
     p = sub.add_parser("bag", help="record and play rosbag2 (MCAP) bags")
-    v = p.add_subparsers(dest="cmd", metavar="command")
-    v.required = True
+    registry.add_sub_verbs(p, "bag")
 
+
+def add_record(v) -> None:
+    """`bag record`."""
     rec = v.add_parser("record", help="record topics into a bag directory")
     rec.add_argument("topics", nargs="*", help="topics to record")
     rec.add_argument("--topics", dest="topics_opt", nargs="+", default=[], metavar="TOPIC")
@@ -43,6 +47,9 @@ def add_parser(sub) -> None:
                      help="only record topics present at start")
     rec.set_defaults(func=record_cmd)
 
+
+def add_play(v) -> None:
+    """`bag play`."""
     play = v.add_parser("play", help="play back a bag directory")
     play.add_argument("bag", help="bag directory")
     play.add_argument("-r", "--rate", type=positive_float, default=1.0)
@@ -61,10 +68,16 @@ def add_parser(sub) -> None:
                       help="seconds to wait before playing")
     play.set_defaults(func=play_cmd)
 
+
+def add_info(v) -> None:
+    """`bag info`."""
     info = v.add_parser("info", help="print information about a bag")
     info.add_argument("bag")
     info.set_defaults(func=info_cmd)
 
+
+def add_reindex(v) -> None:
+    """`bag reindex`."""
     rx = v.add_parser("reindex", help="rebuild a bag whose recorder was killed (MCAP summary "
                       "and metadata.yaml)")
     rx.add_argument("bag")
@@ -114,8 +127,15 @@ def record_cmd(args) -> int:
         try:
             recorder.spin(stop)
         finally:
-            recorder.close()
-            meta = writer.close()
+            # the bag is completed before anything that could hang (Recorder.finish); a second
+            # SIGINT/SIGTERM during the teardown after it ends the process at once
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, lambda *_: recorder.stop_signal())
+            try:
+                meta = recorder.finish(exit_code=1 if recorder.failed.is_set() else 0)
+            except BagError as exc:
+                raise CliError(f"{exc}; the bag in {out} holds what was written before "
+                               f"(astrobee bag reindex {out})") from None
             log(f"Recording stopped: {meta.message_count} messages on {len(meta.topics)} "
                 f"topics in {out}")
     finally:

@@ -111,3 +111,18 @@ def exec_node(package: str, name: str, args: list[str], registry: Registry | Non
     sys.stdout.flush()
     sys.stderr.flush()
     os.execv(argv[0], argv)
+
+
+def main(argv: list[str], prog: str = "roszen") -> int:
+    """`run PACKAGE EXECUTABLE [args]`: -h lists what is installed; otherwise exec the node."""
+    if not argv or argv[0] in ("-h", "--help"):
+        print(f"usage: {prog} run PACKAGE EXECUTABLE [args ...] [--ros-args ...]")
+        for pkg, exes in sorted(packages().items()):
+            print(f"  {pkg}: {', '.join(sorted(exes))}")
+        return 0 if argv else 2
+    if len(argv) < 2:
+        print(f"{prog} run: missing executable name (usage: {prog} run PACKAGE EXECUTABLE)",
+              file=sys.stderr)
+        return 2
+    exec_node(argv[0], argv[1], argv[2:])
+    return 0   # not reached: exec replaced the process
