@@ -10,6 +10,7 @@ wall-clock receive time stays in publish_time. See SimStamp for the rules.
 """
 from __future__ import annotations
 
+import os
 import re
 import sys
 import threading
@@ -113,10 +114,14 @@ class SimStamp:
             self.pending.clear()
         log(f"no /clock within {self.patience:g} s: recording with wall-clock time")
 
-    def close(self) -> None:
-        if self.pending:            # never saw /clock: keep the messages, on wall time
+    def flush_pending(self) -> None:
+        """Write what waits for a first /clock (never seen: on wall time)."""
+        if self.pending:
             self.patience = -1.0
             self.check()
+
+    def close(self) -> None:
+        self.flush_pending()
         self._sub.destroy()
 
 
@@ -138,16 +143,28 @@ class Recorder:
         self.exclude = re.compile(exclude) if exclude else None
         self.exclude_topics = set(exclude_topics or [])
         self.sim = SimStamp(node, writer.write) if use_sim_time else None
+        self.failed = threading.Event()     # the writer failed (a full disk): recording ends
+        writer.on_error = self._on_write_error
         self.include_hidden = include_hidden
         self.discovery = discovery
         self.subscriptions: dict[str, object] = {}
         self.received = 0
+        self.intake = True       # False once stopping: samples still arriving are not written
+        self.completed = False   # the bag is finished (footer, metadata.yaml): safe to exit
+        self.hurry = False       # a second stop signal came: exit as soon as the bag is complete
         self._skipped: set[str] = set()
         self._probes: dict[str, dict] = {}     # topic -> {type: probe subscription} (several types)
         self._warned: set[str] = set()
         self._changed = threading.Event()
         self._changed.set()
         node.context.graph.add_listener(self._changed.set)
+
+    def _on_write_error(self, exc: BaseException) -> None:
+        """First failed write (writer thread): say so at once and end the recording."""
+        self.intake = False
+        log(f"error: writing the bag failed ({exc}); recording stopped after "
+            f"{self.received} messages")
+        self.failed.set()
 
     def wanted(self, topic: str) -> bool:
         if topic in self.exclude_topics or (self.exclude and self.exclude.search(topic)):
@@ -257,6 +274,8 @@ class Recorder:
         sim = self.sim
 
         def on_sample(data: bytes) -> None:
+            if not self.intake:
+                return
             if sim is None:
                 write(topic, data, time.time_ns())
             else:
@@ -277,7 +296,7 @@ class Recorder:
             if missing:
                 log(f"Waiting for topics to appear: {', '.join(missing)}")
         next_look = time.monotonic() + REDISCOVER_PERIOD
-        while not stop.is_set():
+        while not stop.is_set() and not self.failed.is_set():
             self.node.spin_once(timeout_sec=0.05)
             # on every graph change, and once a second besides (a missed event costs a second)
             if self.discovery and (self._changed.is_set() or time.monotonic() > next_look):
@@ -291,7 +310,45 @@ class Recorder:
         while time.monotonic() < end and self.node.spin_once(timeout_sec=0):
             pass
 
+    def finish(self, grace: float = 2.0, exit_code: int = 0):
+        """Stop recording and complete the bag, in an order that cannot lose its footer: the
+        intake closes, the writer writes what it has and finishes the MCAP (summary, footer,
+        metadata.yaml), and only then are the subscriptions undeclared, under a watchdog: a
+        teardown that hangs (zenoh's undeclare, seen in 2 of ~14 launches at shutdown) ends
+        the process after `grace` seconds with `exit_code` instead of ignoring SIGINT/SIGTERM
+        until a SIGKILL cuts the file. `stop_signal()` is for a signal arriving meanwhile.
+        Returns the bag's metadata."""
+        self.intake = False
+        if self.sim is not None:
+            self.sim.flush_pending()
+        try:
+            meta = self.writer.close()      # raises BagError when a write failed (a full disk)
+        finally:
+            self.completed = True
+            if self.hurry:
+                log("stopping at once (second stop signal)")
+                os._exit(exit_code)
+            done = threading.Event()
+
+            def watchdog() -> None:
+                if not done.wait(grace):
+                    log(f"the recorder's teardown hung for {grace:g} s after the bag was closed: exiting")
+                    os._exit(exit_code)
+            threading.Thread(target=watchdog, name="recorder-teardown", daemon=True).start()
+            try:
+                self.close()
+            finally:
+                done.set()
+        return meta
+
+    def stop_signal(self) -> None:
+        """A stop signal during finish(): exit now if the bag is complete, else once it is."""
+        self.hurry = True
+        if self.completed:
+            os._exit(0)
+
     def close(self) -> None:
+        self.intake = False
         self.node.context.graph.remove_listener(self._changed.set)
         if self.sim is not None:
             self.sim.close()

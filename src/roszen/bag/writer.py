@@ -15,6 +15,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from mcap.writer import CompressionType, Writer
 
@@ -38,7 +39,8 @@ class BagWriter:
 
     def __init__(self, directory: str | os.PathLike, *, compression: str = "zstd",
                  chunk_size: int = 1 << 20, flush_interval: float = 1.0,
-                 queue_size: int = 0, library: str = "roszen-bag"):
+                 queue_size: int = 0, library: str = "roszen-bag",
+                 on_error: "Callable[[BaseException], None] | None" = None):
         if compression not in COMPRESSIONS:
             raise BagError(f"unknown compression '{compression}' (zstd, lz4 or none)")
         self.directory = Path(directory)
@@ -61,6 +63,7 @@ class BagWriter:
         self._end_ns = 0
         self._queue: queue.Queue = queue.Queue(queue_size)
         self._error: BaseException | None = None
+        self.on_error = on_error     # called once, on the writer thread, at the first failed write
         self._closed = False
         self.bytes_written = 0
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
@@ -85,6 +88,11 @@ class BagWriter:
         return name in self._topics
 
     @property
+    def error(self) -> BaseException | None:
+        """The first write error (a full disk: OSError ENOSPC), None while all is well."""
+        return self._error
+
+    @property
     def pending(self) -> int:
         return self._queue.qsize()
 
@@ -96,6 +104,10 @@ class BagWriter:
         self._queue.put(_STOP)
         self._thread.join()
         if self._error:
+            try:                     # what reached the file before the error stays readable
+                self._file.close()
+            except OSError:
+                pass
             raise BagError(f"bag writer failed: {self._error}")
         meta = self.metadata()
         self._mcap.add_metadata("rosbag2", {"serialized_metadata": meta.to_yaml(),
@@ -132,7 +144,13 @@ class BagWriter:
                     self._flush()
                     next_flush = time.monotonic() + self.flush_interval
             except BaseException as exc:   # keep draining so producers never block forever
-                self._error = self._error or exc
+                if self._error is None:
+                    self._error = exc
+                    if self.on_error is not None:
+                        try:
+                            self.on_error(exc)
+                        except Exception:   # noqa: BLE001 - the report must not stop the drain
+                            pass
 
     def _handle(self, item) -> None:
         if item[0] == "msg":
