@@ -16,7 +16,8 @@ Peer loss (wall clock: /clock stops with the sim): when every publisher of the s
 left the graph (its liveliness token gone: the sim killed or cut off) the law stops and holds
 the last pose, commands stop with the states, /mob/state says "lost node <name>: ..." and one
 log line names it; when states stop coming for `state_timeout` wall seconds while the publisher
-is still there (a paused or hung sim) /mob/state and one log line say so and the law is left
+is still there (a paused or hung sim) /mob/state and one log line say so (INFO while the sim's
+/clock still comes: a deliberate pause; WARN when it stopped too: a hang) and the law is left
 alone (a paused sim resumes the segment). The first state afterwards re-holds its pose.
 
 Parameters are either applied at run time (flight_mode, bag_mass, bag_size, truth_omega_frame,
@@ -50,6 +51,7 @@ from .pd import State
 from .reference import from_control_states
 
 JUMP_DISTANCE = 0.5  # m between two state samples: a reset, not motion
+CLOCK_HEARTBEAT = 1.5  # wall s: a paused sim's /clock comes once a second (sim_node)
 LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]
 
 # parameters every controller node declares (name -> default)
@@ -192,6 +194,8 @@ class ControllerNode:
         self._lost = ""                 # why states stopped ("" while they come)
         self._gone = False              # ... because the state topic has no publisher left
         self._unpublished_since: float | None = None   # wall s the topic lost its publishers
+        self._last_clock_wall: float | None = None     # wall s of the last /clock sample
+        n.get_clock().add_listener(self._on_clock)
 
         M = roszen.message_class
         self.FamCommand, self.ControlState = M("astrobee_msgs/msg/FamCommand"), M("astrobee_msgs/msg/ControlState")
@@ -305,11 +309,31 @@ class ControllerNode:
             if self.law.state != mc.MotionState.IDLE and self._last_state is not None:
                 self.law.stop(self._last_state, self._last_stamp or 0.0, self._lost)
             self._publish_mob(self._lost, force=True, log=False)
-        elif not self._lost and time.monotonic() - self._last_state_wall > self.state_timeout:
-            self._lost = (f"no state on {self.state_topic} from {who} for "
-                          f"{self.state_timeout:g} s (wall): paused or hung?")
-            self.log.warn(self._lost)
-            self._publish_mob(self._lost, force=True, log=False)
+        elif time.monotonic() - self._last_state_wall > self.state_timeout:
+            self._stalled(who)
+
+    def _on_clock(self, _ns: int) -> None:
+        self._last_clock_wall = time.monotonic()
+
+    def _stalled(self, who: str) -> None:
+        """States stopped, their publisher still there. The sim's /clock still coming (a paused
+        lockstep sim sends one a wall second; a sim flying other robots, one a tick) is a
+        deliberate pause: said at INFO; no /clock either is a hang: WARN, once."""
+        last = self._last_clock_wall
+        if last is not None and last > self._last_state_wall and \
+                time.monotonic() - last <= self.state_timeout + CLOCK_HEARTBEAT:
+            if not self._lost:
+                self._lost = (f"no state on {self.state_topic} from {who}; its /clock goes on: "
+                              f"paused (or flying other robots)")
+                self.log.info(self._lost)
+                self._publish_mob(self._lost, force=True, log=False)
+            return
+        if self._lost.startswith(f"no state on {self.state_topic} from {who} for"):
+            return                                          # the hang is said already
+        self._lost = (f"no state on {self.state_topic} from {who} for "
+                      f"{self.state_timeout:g} s (wall): paused or hung?")
+        self.log.warn(self._lost)
+        self._publish_mob(self._lost, force=True, log=False)
 
     def _state_back(self, state: State) -> None:
         """The first state after a loss or a stall: say so; after a loss hold its pose."""
