@@ -42,6 +42,7 @@ from astrobee import msgconv as mc
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from roszen import node_main
+from roszen.peers import PublisherWatch
 from roszen.parameters import read_only, runtime
 
 from . import mass as mp
@@ -67,7 +68,6 @@ COMMON_PARAMETERS: dict[str, Any] = {
     "safety_margin": 0.05,          # m the filter's boundary sits outside the keep-in boxes
 }
 PEER_CHECK_PERIOD = 0.1             # wall s between two looks at the graph and the state's age
-TOKEN_SETTLE = 0.3                  # wall s a node may keep its token after its topic's went
 
 
 def size_override(size: Any) -> np.ndarray | None:
@@ -188,12 +188,11 @@ class ControllerNode:
         self._last_candidates = -1e9
         self._carrying = False
         # peer watch (wall clock): who publishes our state, when the last state came, why lost
-        self.state_topic = n.resolve_topic_name(mc.POSE if self.state_source == "truth" else mc.EKF)
-        self._state_publishers: list[str] = []
+        self.state_pubs = PublisherWatch(n, mc.POSE if self.state_source == "truth" else mc.EKF)
+        self.state_topic = self.state_pubs.topic     # resolved (namespace, remaps)
         self._last_state_wall: float | None = None
         self._lost = ""                 # why states stopped ("" while they come)
         self._gone = False              # ... because the state topic has no publisher left
-        self._unpublished_since: float | None = None   # wall s the topic lost its publishers
         self._last_clock_wall: float | None = None     # wall s of the last /clock sample
         n.get_clock().add_listener(self._on_clock)
 
@@ -273,32 +272,17 @@ class ControllerNode:
         self.candidates_period = 1.0 / rate if rate > 0 else float("inf")
 
     # ---- peers ------------------------------------------------------------------------
-    def _note_state_publishers(self) -> list[str]:
-        """The state topic's publishers now (other nodes), remembered while there are any: a
-        publisher lost later is named by them."""
-        pubs = sorted({e.node_fqn for e in self.node.get_publishers_info_by_topic(self.state_topic)
-                       if e.node_fqn != self.node.get_fully_qualified_name()})
-        if pubs:
-            self._state_publishers = pubs
-            self._unpublished_since = None
-        return pubs
-
     def _watch_peers(self) -> None:
         """Wall-clock check: the state's publishers still in the graph, the last state recent."""
-        pubs = self._note_state_publishers()
         if self._last_state_wall is None or self._gone:
+            self.state_pubs.publishers()
             return
-        who = ", ".join(n.lstrip("/") for n in self._state_publishers) or "its publisher"
-        if not pubs:
-            alive = {"/" + n if ns in ("", "/") else ns.rstrip("/") + "/" + n
-                     for n, ns in self.node.get_node_names_and_namespaces()}
-            now = time.monotonic()
-            if self._unpublished_since is None:
-                self._unpublished_since = now
-            publisher_alive = any(p in alive for p in self._state_publishers)
-            if publisher_alive and now - self._unpublished_since < TOKEN_SETTLE:
+        loss = self.state_pubs.loss()
+        who = self.state_pubs.who
+        if loss is not None:
+            if loss.pending:
                 return      # a dead process's tokens leave one by one: its node token may lag
-            if publisher_alive:
+            if not loss.node_left:
                 # e.g. the sim reset to a scenario without this robot: not a lost node
                 self._lost = f"no publisher of {self.state_topic} ({who} stopped publishing it)"
                 self.log.warn(f"{self._lost}; stopping (holding the last pose)")
@@ -457,8 +441,8 @@ class ControllerNode:
             return
         state.orientation = rot.normalize(state.orientation)
         self._last_state_wall = time.monotonic()
-        if not self._state_publishers:       # the first states: name their publisher now (a sim
-            self._note_state_publishers()    # killed before the next graph check stays named)
+        if not self.state_pubs.names:        # the first states: name their publisher now (a sim
+            self.state_pubs.publishers()     # killed before the next graph check stays named)
         if self._lost:
             self._state_back(state)
         t = mc.stamp_s(stamp)
