@@ -130,7 +130,9 @@ def test_bag_survives_sigkill_and_reindex_completes_it(tmp_path):
 
     rc = subprocess.run([ASTROBEE, "bag", "reindex", str(bag)], capture_output=True, text=True)
     assert rc.returncode == 0, rc.stderr
-    assert sorted(x.name for x in bag.iterdir()) == ["killed_0.mcap", "metadata.yaml"]
+    # the originals are kept beside (reindex never destroys what it cannot replace)
+    assert sorted(x.name for x in bag.iterdir()) == ["killed_0.mcap", "killed_0.mcap.orig",
+                                                     "metadata.yaml", "metadata.yaml.orig"]
     assert not BagReader(bag).recovered
     from rosbags.highlevel import AnyReader
     with AnyReader([bag]) as r:
@@ -164,8 +166,8 @@ def test_unreadable_bag_directory_one_line_error(tmp_path, setup, needle):
         d.write_text("x")
     elif setup == "empty":
         d.mkdir()
-    elif setup == "badyaml":
-        _write(d)
+    elif setup == "badyaml":        # and no MCAP (beside a good MCAP it reads: test_bag_repair)
+        d.mkdir()
         (d / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
     elif setup == "notmcap":
         d.mkdir()

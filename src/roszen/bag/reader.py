@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import datetime
 import os
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
@@ -66,18 +66,29 @@ class BagReader:
         if not self.directory.is_dir():
             raise BagError(f"not a bag directory: {self.directory}")
         self.meta: BagMetadata | None = None
+        self.meta_problem = ""      # why metadata.yaml was set aside (half-written, lists no file)
+        files: list[Path] = []
         if (self.directory / "metadata.yaml").is_file():
-            self.meta = read_metadata(self.directory)
-            if self.meta.storage_identifier not in ("mcap", ""):
-                raise BagError(f"{self.directory}: storage '{self.meta.storage_identifier}' "
-                               "is not supported (only mcap)")
-            files = [self.directory / f.path for f in self.meta.files]
-            missing = [str(p) for p in files if not p.is_file()]
-            if missing:
-                raise BagError(f"{self.directory}: bag file missing: {missing[0]}")
-        else:
+            try:
+                self.meta = read_metadata(self.directory)
+            except BagError as exc:     # half-written by a writer that died: read the .mcap
+                self.meta_problem = str(exc)
+            if self.meta is not None:
+                if self.meta.storage_identifier not in ("mcap", ""):
+                    raise BagError(f"{self.directory}: storage '{self.meta.storage_identifier}' "
+                                   "is not supported (only mcap)")
+                files = [self.directory / f.path for f in self.meta.files]
+                missing = [str(p) for p in files if not p.is_file()]
+                if missing:
+                    raise BagError(f"{self.directory}: bag file missing: {missing[0]}")
+                if not files:
+                    self.meta_problem = "metadata.yaml lists no bag file"
+                    self.meta = None
+        if self.meta is None:
             files = sorted(self.directory.glob("*.mcap"))
         if not files:
+            if self.meta_problem:
+                raise BagError(f"{self.directory}: no .mcap file ({self.meta_problem})")
             raise BagError(f"{self.directory}: no metadata.yaml and no .mcap file")
         for p in files:
             if not os.access(p, os.R_OK):
@@ -120,8 +131,9 @@ class BagReader:
                         topics=list(wanted) if wanted else None, log_time_order=True):
                     yield BagMessage(self._topic(channel, schema, cache), msg.data, msg.log_time,
                                      msg.publish_time)
-        except (McapError, EOFError, ValueError, OSError) as exc:
-            raise BagError(f"{path}: unreadable MCAP ({exc})") from None
+        except Exception as exc:   # noqa: BLE001 - a damaged chunk raises zstd/lz4/struct errors too
+            kind = type(exc).__name__
+            raise BagError(f"{path}: unreadable MCAP, damaged at some chunk ({kind}: {exc})") from None
 
     def _read_stream(self, path: Path, wanted) -> Iterator[BagMessage]:
         """Sequential read of a file without summary; stops at the first incomplete record."""
@@ -196,12 +208,27 @@ def rebuild_metadata(reader: BagReader) -> BagMetadata:
 
 
 def reindex(directory: str | os.PathLike, compression: str = "zstd") -> BagMetadata:
-    """Make a bag whose writer died complete again: rewrite its MCAP + metadata.yaml."""
+    """Make a bag whose writer died complete again: rewrite its MCAP + metadata.yaml, the
+    originals kept beside as *.orig; a bag with nothing to recover is refused, unchanged."""
     reader = BagReader(directory)
     if not reader.recovered and reader.meta is not None:
         return reader.meta
     schemas = reader.schemas()
     meta = rebuild_metadata(reader)
+    old = reader.meta
+    if old is None and (Path(directory) / "metadata.yaml").is_file():
+        try:
+            old = read_metadata(directory)
+        except BagError:
+            old = None
+    if meta.message_count == 0 and (old is None or old.message_count > 0 or old.topics):
+        said = f" (metadata.yaml lists {old.message_count} messages on {len(old.topics)} topics)" if old else ""
+        raise BagError(f"{directory}: no complete chunk to recover{said}; nothing changed")
+    # what is replaced is kept beside: the cut file may hold more than this reader recovers
+    for path in [*reader.files, Path(directory) / "metadata.yaml"]:
+        backup = path.with_name(path.name + ".orig")
+        if path.is_file() and not backup.exists():
+            shutil.copy2(path, backup)
     for path in reader.files:
         tmp = path.with_name(path.name + ".reindex.tmp")
         try:
@@ -269,6 +296,9 @@ def info_text(directory: str | os.PathLike) -> str:
     if not meta.topics:
         lines.append(head.rstrip())
     lines += ["Services:          0", "Service information: "]
+    if reader.meta_problem:
+        lines.append(f"Note:              metadata.yaml set aside ({reader.meta_problem}); "
+                     "read from the .mcap file; `bag reindex` rewrites it")
     if reader.recovered:
         lines.append("Note:              the MCAP file has no summary (writer was killed); "
                      "complete chunks were counted; `bag reindex` repairs it")
