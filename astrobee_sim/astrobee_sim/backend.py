@@ -119,6 +119,9 @@ class SimBackend(Protocol):
     def robot_state(self, robot: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(position, orientation [x,y,z,w], velocity, angular velocity), world frame."""
 
+    def arm_joints(self, robot: str = "") -> tuple[float, ...]:
+        """The robot's arm joint positions (robot.ARM_JOINTS: proximal, distal rad; fingers m)."""
+
     def faulted(self, robot: str) -> bool:
         """True while the propulsion watchdog holds the robot's wrench at zero."""
 

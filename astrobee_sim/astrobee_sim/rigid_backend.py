@@ -181,6 +181,14 @@ class RigidSim:
     def robot_names(self) -> list[str]:
         return list(self.robots)
 
+    def arm_joints(self, robot: str = "") -> tuple[float, ...]:
+        """Arm joint positions as the pybullet world sets them: deployed with a bag (each
+        robot), stowed without; fingers closed."""
+        if robot not in self.robots:
+            raise KeyError(robot)
+        arm = config.astrobee()["arm"]["deployed" if self.scenario.bag is not None else "stowed"]
+        return (float(arm["proximal"]), float(arm["distal"]), 0.0, 0.0)
+
     def flight_mode_of(self, robot: str) -> FlightMode:
         return self.robots[robot].mode
 

@@ -9,6 +9,7 @@ too (so a gripper cannot drag an anchored bag handle into a wall); the fingers d
 """
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 
@@ -23,6 +24,12 @@ DISTAL_LEN = 0.06
 GRIPPER_LEN = 0.08
 ARM_MASSES = {"proximal": 0.30, "distal": 0.20, "gripper": 0.15, "finger": 0.02}
 MAX_ABS_WRENCH = 100.0   # N or N m: anything larger is a bad command, not a saturation
+# the arm's moving joints, and (parent link, child link) of each: what /tf carries per tick
+ARM_JOINTS = ("arm_proximal_joint", "arm_distal_joint", "finger_left_joint", "finger_right_joint")
+ARM_LINKS = (("body", "arm_proximal"), ("arm_proximal", "arm_distal"), ("gripper", "finger_left"),
+             ("gripper", "finger_right"))
+# the fixed joint (parent, child, translation): /tf_static
+GRIPPER_MOUNT = ("arm_distal", "gripper", (DISTAL_LEN, 0.0, 0.0))
 
 
 def qrot_floats(q, v) -> tuple[float, float, float]:
@@ -33,6 +40,28 @@ def qrot_floats(q, v) -> tuple[float, float, float]:
     tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
     return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
             vz + w * tz + x * ty - y * tx)
+
+
+_MOUNT: list = []
+
+
+def arm_transforms(joints) -> list[tuple[float, ...]]:
+    """The transforms (x, y, z, qx, qy, qz, qw) parent -> child of the arm's moving joints
+    (ARM_LINKS order) at joint positions (proximal, distal in rad; left, right finger in m),
+    from the URDF's joint origins and axes as robot_state_publisher computes them."""
+    if not _MOUNT:
+        arm = config.astrobee()["arm"]
+        _MOUNT.extend([tuple(float(v) for v in arm["mount_xyz"]),
+                       tuple(float(v) for v in rot.from_euler(*arm["mount_rpy"]))])
+    (mx, my, mz), (ax, ay, az, aw) = _MOUNT
+    a, b, left, right = joints
+    sy, cy = math.sin(a / 2), math.cos(a / 2)          # about the mount frame's y
+    sz, cz = math.sin(b / 2), math.cos(b / 2)          # about z
+    fx = GRIPPER_LEN * 0.6
+    return [(mx, my, mz, ax * cy - az * sy, aw * sy + ay * cy, ax * sy + az * cy, aw * cy - ay * sy),
+            (PROXIMAL_LEN, 0.0, 0.0, 0.0, 0.0, sz, cz),
+            (fx, left, 0.0, 0.0, 0.0, 0.0, 1.0),
+            (fx, -right, 0.0, 0.0, 0.0, 0.0, 1.0)]
 
 
 def qrot(q, v) -> np.ndarray:
@@ -113,7 +142,8 @@ class Robot:
 
     def __init__(self, client: int, name: str = "", position=(0, 0, 0), orientation=(0, 0, 0, 1),
                  flight_mode: str | None = None, drag: bool = False):
-        import pybullet as p
+        from .pybullet_import import pybullet
+        p = pybullet()
         self.p, self.client, self.name = p, client, name
         cfg = config.astrobee()
         self.cfg = cfg
@@ -325,6 +355,13 @@ class Robot:
     def gripper(self, open_: bool, instant: bool = False) -> None:
         self.gripper_target = float(self.cfg["arm"]["gripper_open"]) / 2 if open_ else 0.0
         self._set_joints_now() if instant else self._motors()
+
+    def arm_joints(self) -> tuple[float, ...]:
+        """Positions of ARM_JOINTS (rad, rad, m, m): one joint-state query."""
+        ids = self.__dict__.get("_arm_ids")
+        if ids is None:
+            ids = self._arm_ids = [self.joints[j] for j in ARM_JOINTS]
+        return tuple(js[0] for js in self.p.getJointStates(self.id, ids, physicsClientId=self.client))
 
     def joint_positions(self) -> dict[str, float]:
         return {n: self.p.getJointState(self.id, j, physicsClientId=self.client)[0]

@@ -58,7 +58,8 @@ class Simulation:
         defaults = sim_defaults()
         self.dt = 1.0 / float(physics_rate or defaults.get("physics_rate", 350.0))
         wall_thickness = float(wall_thickness or defaults.get("wall_thickness", 0.25))
-        import pybullet as p
+        from .pybullet_import import pybullet
+        p = pybullet()
         self.p = p
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.gui = gui
@@ -215,6 +216,10 @@ class Simulation:
 
     def robot_names(self) -> list[str]:
         return list(self.robots)
+
+    def arm_joints(self, robot: str = "") -> tuple[float, ...]:
+        """The robot's arm joint positions (robot.ARM_JOINTS: rad, rad, m, m)."""
+        return self.robots[robot].arm_joints()
 
     # ---- realism -------------------------------------------------------------------------
     @property

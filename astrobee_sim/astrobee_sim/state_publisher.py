@@ -1,5 +1,7 @@
 """sim_node's per-tick state: /clock, each robot's truth pose and twist, its EkfState and
-propulsion fault, /tf, the cargo bag's state, mesh and surface marker, and /sim/contacts.
+propulsion fault, /tf (each robot's body and its arm's moving joints, as robot_state_publisher
+would from the joint states, and the bag), the cargo bag's state, mesh and surface marker, and
+/sim/contacts.
 
 The messages of a tick keep their layout from tick to tick, so each goes out as a CDR template
 with its numbers packed in place (tick_wire: the same bytes as serialising the message objects,
@@ -16,7 +18,7 @@ import numpy as np
 from astrobee import msgconv as mc
 
 from . import markers, tick_wire
-from .robot import qrot_floats
+from .robot import ARM_LINKS, arm_transforms, qrot_floats
 
 FAULT_WATCHDOG = 1
 BAG_MARKER = "/sim/bag/marker"   # visualization_msgs/Marker TRIANGLE_LIST: the cargo bag's surface
@@ -37,6 +39,11 @@ MESSAGES = {
     "bag": "astrobee_msgs/msg/BagState", "mesh": "astrobee_msgs/msg/BagMesh",
     "contacts": "astrobee_msgs/msg/Contacts", "contact": "astrobee_msgs/msg/Contact",
     "fault": "astrobee_msgs/msg/Fault"}
+
+
+def frame(robot: str, link: str) -> str:
+    """The TF frame of a robot's URDF link: the link's name, under the robot's namespace."""
+    return f"{robot}/{link}" if robot else link
 
 
 def _to_body(q: Any, v: list) -> tuple[float, float, float]:
@@ -78,6 +85,7 @@ class StatePublisher:
         self._template_fields: dict = {}
         self._noisy_for: tuple = (None, False)    # (scenario, its EKF is noisy)
         self._ekf_state = getattr(host.sim, "ekf_state", host.sim.robot_state)
+        self._arm_joints = getattr(host.sim, "arm_joints", None)     # None: no arm on /tf
         self._msgs = self._global_msgs()
         self._last_mesh = -1e9
 
@@ -118,7 +126,12 @@ class StatePublisher:
         ts.header = ps.header
         ts.child_frame_id = ekf.child_frame_id
         ts.transform.rotation = ps.pose.orientation
-        return {"pose": ps, "twist": tw, "ekf": ekf, "tfs": ts}
+        arm = []
+        for parent, child in ARM_LINKS:
+            t = M["tfs"]()
+            t.header.frame_id, t.child_frame_id = frame(name, parent), frame(name, child)
+            arm.append(t)
+        return {"pose": ps, "twist": tw, "ekf": ekf, "tfs": ts, "arm": arm}
 
     def _global_msgs(self) -> dict:
         M = self.M
@@ -169,6 +182,7 @@ class StatePublisher:
         if sc is not self._noisy_for[0]:
             self._noisy_for = (sc, sc.realism.ekf_noisy)
         noisy = self._noisy_for[1]
+        arm_joints = self._arm_joints
         for name in host.names:
             io = self.robot_io[name]
             msgs = io["msgs"]
@@ -188,6 +202,10 @@ class StatePublisher:
                        [sec, nsec, *ekf_pose, *v.tolist(), *_to_body(qe, w.tolist())])
             tf_children.append(msgs["tfs"])
             tf_values += pose_values
+            if arm_joints is not None:
+                tf_children += msgs["arm"]
+                for tr in arm_transforms(arm_joints(name)):
+                    tf_values += (sec, nsec, *tr)
             fault = sim.faulted(name)
             if fault != io["fault_state"]:
                 io["fault_state"] = fault

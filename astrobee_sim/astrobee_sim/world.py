@@ -337,7 +337,8 @@ def build_pybullet(world: World, client: int, visuals: bool = False,
     not collide properly with compounds (measured: FEM nodes sank through). per_body <= 1 (FEM
     worlds) or visuals: one plain box body per slab.
     """
-    import pybullet as p
+    from .pybullet_import import pybullet
+    p = pybullet()
     per_body = min(per_body, MAX_COMPOUND_CHILDREN)
     ids = []
     owner = _slab_module(world)
