@@ -1,6 +1,6 @@
-"""Run summary: the verdict of a leg (`leg_verdict`: every robot at its goal, no contact, no
-fault; decided by astrobee.task's TaskMonitor, so the mission and the Task never disagree) and
-of a run, summary.json, and `finalize` (the plots re-drawn from the closed recording).
+"""Run summary: the verdict of a run (a leg's is astrobee.task's, judged by the mission on the
+leg's samples: astrobee_bringup.mission.result), summary.json, and `finalize` (the plots
+re-drawn from the closed recording).
 
 The pieces it used to hold live in modules of one job: the flight's time series and reading it
 back from the recording in astrobee_bringup.series, the leg's plot in astrobee_bringup.leg_plot
@@ -19,7 +19,6 @@ from typing import Any
 import numpy as np
 
 from astrobee.msgconv import COMMAND, MOB_STATE, POSE, TRAJ  # noqa: F401 - the mission's names
-from astrobee.task import Goal, Task, TaskMonitor
 from astrobee.task import robot_named  # noqa: F401
 from astrobee_bringup.leg_plot import _module_labels, _unit, plot  # noqa: F401
 from astrobee_bringup.series import (BAG_STATE, CONTACTS, Series, _t, contact_name,  # noqa: F401
@@ -45,47 +44,6 @@ class RobotResult:
     contacts: int = 0                           # samples with this robot touching the station
     faults: list[str] = field(default_factory=list)
     failed_at: dict[str, Any] | None = None     # {"t": sim s, "position": [x, y, z], "why": ...}
-
-
-def task_monitor(robots: list[RobotResult], tolerance_position: float | None,
-                 tolerance_attitude: float | None, cargo_contacts: int = 0,
-                 aborted: str = "") -> TaskMonitor:
-    """The Task's monitor holding a leg's end figures (astrobee.task decides, not this module):
-    each robot's final errors, contact samples and faults, the cargo bag's contacts, an abort."""
-    def goal(r: RobotResult) -> Goal:
-        g = list(r.goal) if len(r.goal) == 7 else [0.0] * 6 + [1.0]
-        return Goal(np.asarray(g[:3], float), np.asarray(g[3:], float))
-    task = Task({r.name: goal(r) for r in robots}, tolerance_position, tolerance_attitude)
-    touches = {contact_name(r.name): r.contacts for r in robots}
-    touches["bag"] = cargo_contacts
-    return TaskMonitor.from_figures(
-        task, {r.name: (r.final_position_error, r.final_attitude_error) for r in robots},
-        touches, {r.name: list(r.faults) for r in robots}, aborted)
-
-
-def robot_problems(r: RobotResult, tolerance_position: float | None,
-                   tolerance_attitude: float | None) -> list[str]:
-    """What keeps one robot from success in a leg (empty: it reached its goal within the
-    tolerances, with no contact and no fault): the Task's judgement of its figures."""
-    return task_monitor([r], tolerance_position, tolerance_attitude).robot_problems(r.name)
-
-
-def leg_verdict(robots: list[RobotResult], tolerance_position: float | None,
-                tolerance_attitude: float | None, cargo_contacts: int = 0,
-                aborted: str = "") -> tuple[bool, str]:
-    """A leg succeeds only if every robot reaches its goal with no contact and no fault, and the
-    cargo bag touches nothing (the Task's verdict of the leg's end figures). Sets each robot's
-    success/reason/reached_goal; returns (success, reason), the reason naming each failing robot
-    (single robot: its problems alone)."""
-    if not robots:
-        return False, aborted or "no robot flown"
-    monitor = task_monitor(robots, tolerance_position, tolerance_attitude, cargo_contacts, aborted)
-    for r in robots:
-        probs = monitor.robot_problems(r.name)
-        r.reached_goal = not any(p.startswith("final") for p in probs)
-        r.success = not probs
-        r.reason = "goal reached" if not probs else "; ".join(probs)
-    return monitor.verdict()
 
 
 def run_verdict(legs: list[dict[str, Any]]) -> tuple[bool, str]:

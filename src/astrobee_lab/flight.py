@@ -120,7 +120,8 @@ class Flight:
         safety: the CBF filter between the law and the sim. realism: a preset name of
         config/realism.yaml, a mapping of knobs or an astrobee.realism.Realism (the scenario's
         otherwise). state_source: 'ekf' (the law sees the estimate) | 'truth'.
-        task: keywords of Task.from_scenario (time_limit, end_on_contact, weights, goals...).
+        task: keywords of Task.from_scenario (settle_budget, time_limit, end_on_contact,
+        weights, goals...).
         plan: False flies no segment (the law holds the start pose; environments in wrench
         mode use the reference only for the observation)."""
         overrides = parse_overrides({"bag_model": bag_model, "bag_variant": bag_variant,
@@ -210,10 +211,9 @@ class Flight:
             self._plan()
             for n, traj in self.trajs.items():
                 self.laws[n].follow(traj, sim.time)
-        task_kw = dict(self.task_kw)
-        settle = float(self.controller_params.get("settle_time", 5.0))
+        # the budget: the plan's end + the task's settle_budget (astrobee.task's default)
         self.task = Task.from_scenario(self.scenario, plan_duration=None if math.isnan(
-            self.plan_duration) else self.plan_duration, settle_time=settle, **task_kw)
+            self.plan_duration) else self.plan_duration, **self.task_kw)
         self.monitor = self.task.monitor()
         if self._plan_error:
             self.monitor.fail(self._plan_error)
@@ -405,8 +405,9 @@ class Flight:
         return all(law.segment_result != "" for law in self.laws.values())
 
     def finished(self) -> bool:
-        """The leg is over as the mission sees it: the segment done, a fault watched for
-        FAULT_WATCH s, a failure before flight, or the time limit."""
+        """The leg is over as the mission sees it: the Task's goal reached (every robot at rest
+        at its goal; the laws keep holding, their own STOPPED ends nothing), a fault watched
+        for FAULT_WATCH s, a failure before flight, or the time budget out."""
         m = self.monitor
         if m.failure or (self.traj is None and self.plan_enabled):
             return True
@@ -415,7 +416,7 @@ class Flight:
                 self._fault_t = self.sim.time
             if self.sim.time - self._fault_t >= FAULT_WATCH:
                 return True
-        if self.traj is not None and self.segment_done:
+        if self.traj is not None and m.goal_reached:
             return True
         return m.truncated
 

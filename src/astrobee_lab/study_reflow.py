@@ -113,9 +113,7 @@ def judge_recording(spec: dict, leg: dict, bag: Path) -> dict | None:
     sc = build_scenario(spec)
     pd = leg.get("plan_duration")
     kw = {"time_limit": spec["time_limit"]} if spec.get("time_limit") else {}
-    task = Task.from_scenario(sc, plan_duration=float(pd) if pd else None,
-                              settle_time=float((spec.get("params") or {}).get("settle_time", 5.0)),
-                              **kw)
+    task = Task.from_scenario(sc, plan_duration=float(pd) if pd else None, **kw)
     m = judge_bag(bag, task)
     ok, cause = m.verdict()
     return {"success": ok, "cause": cause, **m.metrics()}

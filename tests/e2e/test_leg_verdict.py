@@ -1,15 +1,20 @@
-"""The per-robot verdict of a leg and of a run (summary.leg_verdict / run_verdict), and the plot
-of a failed two-robot leg, without any process."""
+"""The per-robot verdict of a leg (astrobee.task judging the leg's samples, as the mission's
+finish_leg does) and of a run (summary.run_verdict), and the plot of a failed two-robot leg,
+without any process."""
 from __future__ import annotations
 
 from dataclasses import asdict
+from types import SimpleNamespace
 
 import numpy as np
 
 from astrobee import config
+from astrobee.task import Goal, Task, TaskSample, judge
 from astrobee_bringup import summary as sm
 
 TOL_P, TOL_A = 0.2, 0.35
+Q = np.array([0.0, 0.0, 0.0, 1.0])
+GOALS = {"": np.array([10.93, -6.0, 4.85]), "bumble": np.array([10.93, -5.05, 4.85])}
 
 
 def _robot(name: str, **kw) -> sm.RobotResult:
@@ -18,43 +23,68 @@ def _robot(name: str, **kw) -> sm.RobotResult:
     return sm.RobotResult(name=name, **base)
 
 
-def test_every_robot_at_its_goal_is_a_success():
-    robots = [_robot(""), _robot("bumble")]
-    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A)
-    assert ok and why == "goal reached"
-    assert all(r.success and r.reached_goal and r.reason == "goal reached" for r in robots)
+def _judge(off: dict | None = None, touching=(), faults=None, aborted="", seconds=3.0):
+    """Two robots held at their goals (offset by `off`) for `seconds`, at rest; contacts of
+    the bodies `touching` at every tick, faults per robot."""
+    off = off or {}
+    task = Task({n: Goal(g, Q) for n, g in GOALS.items()}, TOL_P, TOL_A).with_plan(0.0, 10.0)
+    samples = [TaskSample(t=k * 0.1, poses={n: (g + off.get(n, 0.0), Q) for n, g in GOALS.items()},
+                          velocities={n: (np.zeros(3), np.zeros(3)) for n in GOALS},
+                          contacts=len(touching), touching=tuple(touching),
+                          contact_bodies=tuple(f"{b}-iss" for b in touching),
+                          faults=faults or {})
+               for k in range(int(seconds / 0.1) + 1)]
+    return judge(task, samples, aborted)
+
+
+def test_every_robot_at_its_goal_and_at_rest_is_a_success():
+    m = _judge()
+    assert m.verdict() == (True, "goal reached")
+    assert m.robot_problems("") == [] and m.robot_problems("bumble") == []
 
 
 def test_one_robot_off_its_goal_fails_the_leg_naming_it():
-    robots = [_robot(""), _robot("bumble", final_position_error=0.5)]
-    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A)
+    m = _judge(off={"bumble": np.array([0.5, 0.0, 0.0])})
+    ok, why = m.verdict()
     assert not ok and why.startswith("robot bumble: final position error 0.500 m")
-    assert robots[0].success and not robots[1].success and not robots[1].reached_goal
+    assert m.robot_problems("") == []        # at rest at its goal: not the cause
 
 
 def test_a_fault_or_a_contact_fails_even_at_the_goal():
-    robots = [_robot("", contacts=3), _robot("bumble", faults=["sim/propulsion_watchdog: x"])]
-    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A)
+    m = _judge(touching=("robot",), faults={"bumble": ("sim/propulsion_watchdog: x",)})
+    ok, why = m.verdict()
     assert not ok
-    assert "the default robot: 3 contact samples" in why and "robot bumble: fault: sim/propulsion_watchdog" in why
-    assert all(r.reached_goal and not r.success for r in robots)
+    assert "the default robot: 21 contact samples" in why
+    assert "robot bumble: fault: sim/propulsion_watchdog" in why
 
 
-def test_cargo_bag_contact_and_unknown_pose_fail():
-    ok, why = sm.leg_verdict([_robot("")], TOL_P, TOL_A, cargo_contacts=2)
-    assert not ok and why == "cargo bag: 2 contact samples"
-    r = _robot("", final_position_error=None)
-    ok, why = sm.leg_verdict([r], TOL_P, TOL_A)
-    assert not ok and "unknown (no pose)" in why and not r.reached_goal
-    ok, why = sm.leg_verdict([], TOL_P, TOL_A)
+def test_cargo_bag_contact_and_no_robot_fail():
+    ok, why = _judge(touching=("bag",)).verdict()
+    assert not ok and why == "cargo bag: 21 contact samples"   # the leg ends at rest, t = 2 s
+    ok, why = judge(Task({}, TOL_P, TOL_A), []).verdict()
     assert not ok and why == "no robot flown"
 
 
 def test_an_aborted_leg_keeps_its_cause_as_the_reason():
-    robots = [_robot("", final_position_error=3.0), _robot("bumble", faults=["watchdog"])]
-    ok, why = sm.leg_verdict(robots, TOL_P, TOL_A, aborted="flight aborted on a fault of robot bumble")
-    assert not ok and why == "flight aborted on a fault of robot bumble"
-    assert not robots[0].success and not robots[1].success
+    m = _judge(off={"": np.array([3.0, 0, 0])}, aborted="flight aborted on a fault of robot bumble")
+    assert m.verdict() == (False, "flight aborted on a fault of robot bumble")
+
+
+def test_finish_leg_fills_each_robot_from_the_tasks_judgement():
+    """The mission's finish_leg: a robot with no pose is 'unknown (no pose)', its result says
+    it did not reach its goal; the leg's reason is the abort."""
+    from astrobee_bringup.mission.result import LegResult, finish_leg
+    w = SimpleNamespace(name="", named="the default robot", series=sm.Series(), pose=None,
+                        faults=[], sim_time=float("nan"), position_at=lambda t: None)
+    client = SimpleNamespace(watches={"": w}, flying=[""], series=w.series, realism={},
+                             _starts={}, _goals={"": (GOALS[""], Q)}, leg=None, task=None,
+                             start_ns=None)
+    res = LegResult(scenario="x", reason="planning failed (code -1): no", tolerance_position=TOL_P,
+                    tolerance_attitude=TOL_A)
+    finish_leg(client, res)
+    assert (res.success, res.reason) == (False, "planning failed (code -1): no")
+    r = res.robots[0]
+    assert not r["success"] and not r["reached_goal"] and "unknown (no pose)" in r["reason"]
 
 
 def test_any_fault_in_any_leg_fails_the_run_with_the_robot_named():
