@@ -40,6 +40,7 @@ import numpy as np
 from astrobee import flight_modes
 from astrobee import msgconv as mc
 from astrobee import rotations as rot
+from astrobee.overrides import MASS_RANGE
 from astrobee.flight_modes import FlightMode
 from roszen import node_main
 from roszen.peers import PublisherWatch
@@ -58,7 +59,7 @@ LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]
 # parameters every controller node declares (name -> default)
 COMMON_PARAMETERS: dict[str, Any] = {
     "state_source": "ekf",          # ekf | truth
-    "flight_mode": "",              # "" = nominal until /mob/flight_mode says otherwise
+    "flight_mode": flight_modes.get().name,   # config's default until /mob/flight_mode says
     "bag_mass": -1.0,               # kg; < 0 = the scenario's (from /sim/scenario)
     "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
     "truth_omega_frame": "world",   # frame of loc/truth/twist's angular velocity: world | body
@@ -68,6 +69,26 @@ COMMON_PARAMETERS: dict[str, Any] = {
     "safety_margin": 0.05,          # m the filter's boundary sits outside the keep-in boxes
 }
 PEER_CHECK_PERIOD = 0.1             # wall s between two looks at the graph and the state's age
+
+
+BAG_SIZE_MAX = 1.0                  # m per side of a bag_size parameter (a double CTB: 0.5)
+
+
+def check_bag_mass(mass: float) -> None:
+    """A bag_mass parameter: <= 0 (the scenario's) or a mass sim_node could simulate (kg)."""
+    if mass > 0 and not MASS_RANGE[0] <= mass <= MASS_RANGE[1]:
+        raise ValueError(f"bag_mass must be <= 0 (the scenario's) or {MASS_RANGE[0]:g}.."
+                         f"{MASS_RANGE[1]:g} kg, got {mass:g}")
+
+
+def bag_descriptors(bag: Callable[[], "CarriedBag"]) -> dict[str, Any]:
+    """bag_mass and bag_size applied at run time to `bag()`, within sim_node's ranges."""
+    return {
+        "bag_mass": runtime(lambda v: setattr(bag(), "mass_param", float(v)),
+                            max_value=MASS_RANGE[1], validator=check_bag_mass),
+        "bag_size": runtime(lambda v: setattr(bag(), "size_param", size_override(v)),
+                            min_value=0.0, max_value=BAG_SIZE_MAX, validator=size_override),
+    }
 
 
 def size_override(size: Any) -> np.ndarray | None:
@@ -165,17 +186,11 @@ class ControllerNode:
         how = self._parameter_descriptors()
         values = {name: n.declare_parameter(name, default, how.get(name) or read_only()).value
                   for name, default in {**COMMON_PARAMETERS, **(parameters or {})}.items()}
-        self.state_source = str(values["state_source"])
-        if self.state_source not in ("ekf", "truth"):
-            raise ValueError(f"state_source must be ekf or truth, not {self.state_source!r}")
+        self.state_source = str(values["state_source"])            # checked by its descriptor
         self.truth_omega_frame = str(values["truth_omega_frame"])
-        if self.truth_omega_frame not in ("world", "body"):
-            raise ValueError(f"truth_omega_frame must be world or body, not {self.truth_omega_frame!r}")
         self.bag = CarriedBag(values["bag_mass"], values["bag_size"])
         self._set_candidates_rate(float(values["candidates_rate"]))
-        self.state_timeout = float(values["state_timeout"])
-        if not (np.isfinite(self.state_timeout) and self.state_timeout > 0):
-            raise ValueError(f"state_timeout must be > 0 s, got {self.state_timeout:g}")
+        self.state_timeout = float(values["state_timeout"])      # >= 0.05 s: its descriptor
         mode = flight_modes.get(str(values["flight_mode"]) or None)
         law_params = {k: values[k] for k in (parameters or {})}
         self.law: ControlLaw = make_law(mode, mp.robot(), law_params)
@@ -248,20 +263,15 @@ class ControllerNode:
         def flight_mode(v: str) -> None:
             self.law.set_flight_mode(flight_modes.get(str(v) or None))
 
-        def omega_frame(v: str) -> None:
-            if v not in ("world", "body"):
-                raise ValueError(f"must be world or body, not {v!r}")
-
         def set_attr(obj: Callable[[], Any], attr: str, convert: Callable) -> Callable:
             return lambda v: setattr(obj(), attr, convert(v))
 
         return {
-            "flight_mode": runtime(flight_mode, validator=lambda v: flight_modes.get(str(v) or None)),
-            "bag_mass": runtime(set_attr(lambda: self.bag, "mass_param", float)),
-            "bag_size": runtime(set_attr(lambda: self.bag, "size_param", size_override),
-                                validator=size_override),
+            "flight_mode": runtime(flight_mode, choices=flight_modes.names()),
+            **bag_descriptors(lambda: self.bag),
+            "state_source": read_only(choices=("ekf", "truth")),
             "truth_omega_frame": runtime(set_attr(lambda: self, "truth_omega_frame", str),
-                                         validator=omega_frame),
+                                         choices=("world", "body")),
             "candidates_rate": runtime(self._set_candidates_rate, min_value=0.0),
             "state_timeout": runtime(set_attr(lambda: self, "state_timeout", float),
                                      min_value=0.05),

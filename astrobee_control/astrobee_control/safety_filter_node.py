@@ -31,7 +31,7 @@ from astrobee import msgconv as mc
 from roszen import node_main
 from roszen.parameters import read_only, runtime
 
-from .controller_node import CarriedBag, ekf_state, size_override
+from .controller_node import CarriedBag, bag_descriptors, ekf_state
 from .pd import State
 from .safety.law_filter import DEFAULT_MARGIN, LawFilter, SafetyResult
 
@@ -40,7 +40,7 @@ SAFETY = "gnc/ctl/safety"                     # latched diagnostics (DiagnosticA
 STATE_MAX_AGE = 0.5                           # s of sim time: an older state is not used
 
 PARAMETERS: dict[str, Any] = {
-    "flight_mode": "",              # "" = nominal until /mob/flight_mode says otherwise
+    "flight_mode": flight_modes.get().name,   # config's default until /mob/flight_mode says
     "margin": DEFAULT_MARGIN,       # m the filter's boundary sits outside the keep-in boxes
     "bag_mass": -1.0,               # kg; < 0 = the scenario's
     "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
@@ -135,13 +135,10 @@ class SafetyFilterNode:
         """flight_mode, bag_mass, bag_size and diagnostics_rate are applied at run time; margin
         is read-only (the candidate boxes are grown by it once, at start)."""
         if name == "flight_mode":
-            return runtime(lambda v: self.lf.set_flight_mode(flight_modes.get(str(v) or None)),
-                           validator=lambda v: flight_modes.get(str(v) or None))
-        if name == "bag_mass":
-            return runtime(lambda v: setattr(self.bag, "mass_param", float(v)))
-        if name == "bag_size":
-            return runtime(lambda v: setattr(self.bag, "size_param", size_override(v)),
-                           validator=size_override)
+            return runtime(lambda v: self.lf.set_flight_mode(flight_modes.get(str(v))),
+                           choices=flight_modes.names())
+        if name in ("bag_mass", "bag_size"):
+            return bag_descriptors(lambda: self.bag)[name]
         if name == "diagnostics_rate":
             return runtime(lambda v: self.lf.set_diagnostics_rate(float(v)), min_value=0.0)
         return read_only()

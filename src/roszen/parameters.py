@@ -188,7 +188,7 @@ def runtime(apply: Callable[[Any], None], description: str = "", *,
     """A parameter applied at run time by `apply(value)`; numbers must be finite and, when
     given, within [min_value, max_value] and one of `choices`; `validator` refuses other bad
     values. The same checks hold for the start value."""
-    text = _constraints(min_value, max_value, choices, "applied at run time", finite=True)
+    text = _constraints(min_value, max_value, choices, "applied at run time", finite=choices is None)
     return ParameterDescriptor(description=description, min_value=min_value, max_value=max_value,
                                choices=None if choices is None else tuple(choices),
                                validator=validator, on_change=apply, additional_constraints=text)
