@@ -7,6 +7,7 @@
     base: {scenario: node2_to_jem_fem_bag, realism: astrobee} # every flight's parameters
     seeds: 5                           # 0..4, or a list
     time_limit: 90                     # optional, sim s (else the Task's: plan + settle + 10 s)
+    labels: {realism.disturbances.0.magnitude: bump on the bag (N)}  # report axes (optional)
     metrics: [success, contacts, min_bag_clearance]   # columns kept in the table (default: all)
     blocks:                            # each block: set (fixed) x grid (product) x random draws
       - name: routes
@@ -44,7 +45,7 @@ import yaml
 from astrobee.overrides import OVERRIDE_KEYS, parse_overrides
 
 TOP_KEYS = {"name", "description", "controllers", "base", "seeds", "time_limit", "metrics",
-            "blocks", "grid", "random", "set", "notes"}
+            "blocks", "grid", "random", "set", "notes", "labels"}
 BLOCK_KEYS = {"name", "set", "grid", "random", "seeds", "description"}
 # the scenario overrides a flight may set (astrobee.overrides; realism is kept apart in a spec)
 OVERRIDES = tuple(k for k in OVERRIDE_KEYS if k not in ("realism", "robots"))
@@ -382,6 +383,11 @@ def parse_study(data: Any, default_name: str = "study", where: str = "study",
     if not isinstance(data, dict):
         raise StudyError(f"{where} must be a mapping (name, controllers, base, blocks...)")
     _check_keys(data, TOP_KEYS, where)
+    labels = data.get("labels")
+    if labels is not None and (not isinstance(labels, dict)
+                               or not all(isinstance(v, str) for v in labels.values())):
+        raise StudyError(f"{where}: labels must map swept keys to axis labels (text), "
+                         f"got {labels!r}")
     name = str(data.get("name") or default_name)
     if not name.replace("_", "").replace("-", "").isalnum():
         raise StudyError(f"{where}: name must be letters, digits, '_' or '-', got {name!r}")
