@@ -186,3 +186,69 @@ def test_a_row_reflown_through_the_graph_matches_its_study_row(tmp_path):
     assert res.leg["scenario"].startswith("study_") and res.leg["success"] is True
     # the same seed reached the simulator: the realism knobs are in the graph's summary
     assert (res.run_dir / "bag").is_dir() and (res.run_dir / "reflow.json").is_file()
+
+
+# ---- the report (no flights: rows made up for a swept study with labels) --------------------
+SWEPT = dict(SMALL, seeds=3, labels={"realism.disturbances.0.magnitude": "bump on the bag (N)"},
+             grid={"controller": ["pd", "mpc_a"], "realism.disturbances.0.magnitude": [2.0, 8.0]})
+SWEPT["base"] = dict(SMALL["base"], realism={"preset": "astrobee", "disturbances": [
+    {"target": "bag", "magnitude": 5.0, "duration": 0.2, "time": 1.0}]})
+
+
+def _made_up_rows(study) -> list[dict]:
+    """One row per flight: pd succeeds on every seed at 2 N and on seed 0 at 8 N; mpc_a on
+    seeds 0 and 1 at both."""
+    rows = []
+    for f in study.flights:
+        mag, seed = f.swept["realism.disturbances.0.magnitude"], f.spec["seed"]
+        ok = (seed in (0, 1)) if f.label == "mpc_a" else (mag == 2.0 or seed == 0)
+        rows.append({"index": f.index, "key": f.key, "block": f.block, "label": f.label,
+                     "realism.disturbances.0.magnitude": mag, "seed": seed, "status": "ok",
+                     "success": ok, "cause": "goal reached" if ok else "final position error",
+                     "min_bag_clearance": 0.1 + 0.01 * seed, "contacts": 0, "wall_time": 1.0})
+    return rows
+
+
+def test_the_report_states_intervals_pairs_and_is_one_html_page(tmp_path):
+    from html.parser import HTMLParser
+
+    from astrobee_lab.study_report import write_report
+    from astrobee_lab.study_stats import paired, wilson
+    study = load_study(write(tmp_path, SWEPT))
+    md = write_report(study, _made_up_rows(study), tmp_path).read_text()
+    lo, hi = wilson(3, 3)
+    assert (lo, hi) == (pytest.approx(3 / (3 + 1.959964 ** 2)), 1.0)   # 3/3: 44-100%
+    assert "| 2.0 | pd | 3 | 100% (3/3) | 44%-100% |" in md
+    assert "\n| bump on the bag (N) | controller | n | success | success 95% interval |" in md
+    # paired seeds at 8 N: pd only seed 0, mpc_a seeds 0 and 1: one discordant seed (1)
+    assert paired("pd", "mpc_a", {0: True, 1: False, 2: False},
+                  {0: True, 1: True, 2: False}).p_value == 1.0
+    assert "| 8.0 | pd vs mpc_a | 3 | 1 | 0 (pd) | 1 (mpc_a) | 1 | 1 |" in md
+    assert paired("a", "b", {s: True for s in range(6)}, {s: False for s in range(6)}
+                  ).p_value == pytest.approx(2 / 64)         # 6 discordant seeds, one way
+
+    class Page(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.tables, self.images, self.heads, self.xlinks = 0, [], [], []
+
+        def handle_starttag(self, tag, attrs):
+            a = dict(attrs)
+            if tag == "table":
+                self.tables += 1
+            elif tag == "img":
+                self.images.append(a.get("src", ""))
+            elif tag in ("link", "script") or (tag == "a" and a.get("href", "").startswith("http")):
+                self.xlinks.append(tag)
+
+    page = Page()
+    page.feed((tmp_path / "report.html").read_text())
+    tables = sum(1 for ln in md.splitlines() if ln.startswith("|---"))
+    assert page.tables == tables == 2                         # the block's table and its pairs
+    pngs = sorted((tmp_path / "plots").glob("*.png"))
+    assert len(pngs) == 2 and len(page.images) == md.count("![") == 2
+    import base64
+    assert all(src.startswith("data:image/png;base64,") for src in page.images)
+    assert sorted(base64.b64decode(s.split(",", 1)[1]) for s in page.images) == \
+        sorted(p.read_bytes() for p in pngs)
+    assert not page.xlinks                                    # nothing fetched from elsewhere
