@@ -307,10 +307,18 @@ class Launcher:
         return [*self.astrobee_cmd, "run", spec.package, spec.executable, *tail]
 
     def check(self) -> None:
-        """Fail before starting anything if a node's executable cannot be found."""
+        """Fail before starting anything if a node's executable cannot be found, or if the
+        router's port already serves a graph running nodes of this launch (a second launch on
+        one --port would reset the first one's sim and mix both flights)."""
         if self.use_ros2 or self._checked:
             return
         self._checked = True
+        if any(s.kind == "router" for s in self.specs) and port_open(self.port):
+            ours = {"/" + s.name.strip("/") for s in self.specs if s.kind not in ("router", "recorder")}
+            clash = sorted(ours & running_nodes(self.port))
+            if clash:
+                raise LaunchError(f"the graph on port {self.port} already runs {', '.join(clash)} "
+                                  f"(another launch?): give this one its own --port (or ROS_DOMAIN_ID)")
         from roszen.cli.common import CliError
         from roszen.cli.run import resolve
         for spec in self.specs:
@@ -516,6 +524,20 @@ def _killpg(proc: subprocess.Popen, sig: int) -> None:
         os.killpg(proc.pid, sig)
     except (ProcessLookupError, PermissionError):
         pass
+
+
+def running_nodes(port: int, timeout: float = 3.0) -> set[str]:
+    """Fully qualified names of the nodes in the graph of the router on `port` (the graph
+    cache's first liveliness query answers with every token already there)."""
+    import roszen
+    from roszen.testing import zenoh_env
+    env = zenoh_env(port, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
+    ctx = roszen.Context(env=env)
+    try:
+        ctx.graph.wait_ready(timeout)
+        return {(ns.rstrip("/") + "/" + name) for name, ns in ctx.graph.get_node_names_and_namespaces()}
+    finally:
+        ctx.shutdown()
 
 
 def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: Path | None = None,
