@@ -15,6 +15,7 @@ is told, `step()` adds actuation noise, propulsion lag and disturbance pulses
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -43,16 +44,19 @@ class Simulation:
                  bag_resolution: int | None = None, robots: list[str] | None = None,
                  flight_mode: str | None = None, wall_thickness: float | None = None,
                  wall_bodies: int = 16, fem_solver: str | None = None,
-                 bag_mass: float | None = None, realism: str | dict | Realism | None = None):
+                 bag_mass: float | None = None, realism: str | dict | Realism | None = None,
+                 grasp: str | None = None):
         """scenario: a name in config/scenarios (loaded with the bag_*/robots/flight_mode/
         fem_solver overrides, which also apply to later resets by name) or a Scenario as is.
         realism: a preset name, a mapping of knobs or a Realism replacing the scenario's (also
         for later resets, a Scenario given whole included); None keeps the scenario's.
-        Raises ScenarioError for a bad scenario, realism or seed before pybullet is started."""
+        grasp: the bag's grasp model (astrobee_sim.grasp; strap | hinge | clamp) replacing the
+        scenario's, likewise. Raises ScenarioError for a bad scenario, realism or seed before pybullet is started."""
         self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
                           "bag_resolution": bag_resolution, "bag_mass": bag_mass, "robots": robots,
                           "flight_mode": flight_mode, "fem_solver": fem_solver,
                           "realism": None if realism is None else resolve_realism(realism)}
+        self._grasp = grasp or None
         sc = self._resolve(scenario, None)
         seed = check_seed(seed)
         defaults = sim_defaults()
@@ -93,6 +97,10 @@ class Simulation:
         forced = self.overrides.get("realism")
         if forced is not None and sc.realism != forced:
             sc = sc.override(realism=forced)
+        if self._grasp and sc.bag is not None and sc.bag.grasp != self._grasp:
+            bag = replace(sc.bag, grasp=self._grasp)
+            bag.validate()
+            sc = replace(sc, bag=bag)
         return sc
 
     def _build(self, sc: Scenario, seed: int) -> None:
@@ -131,6 +139,9 @@ class Simulation:
                     kw["resolution"] = int(bag.resolution)
                 kw["solver"] = bag.solver
             kw.update(bag_params(bag.model, config.bags()["models"].get(bag.model, {}), sc.realism))
+            kw["grasp"] = bag.grasp
+            if sc.realism.handle_stiffness_scale != 1.0:
+                kw["handle_stiffness_scale"] = sc.realism.handle_stiffness_scale
             self.bag = make_bag(bag.model, c, bag.variant, **kw)
             self.bag.attach(list(self.robots.values()))
         if self.gui:

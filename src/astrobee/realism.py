@@ -21,7 +21,7 @@ PRESETS_FILE = "realism.yaml"
 MAX_NOISE = {"ekf_position_noise": 1.0, "ekf_attitude_noise": 1.0, "ekf_velocity_noise": 1.0,
              "ekf_omega_noise": 1.0, "ekf_position_bias": 1.0, "ekf_attitude_bias": 1.0,
              "actuation_noise": 2.0, "propulsion_lag": 10.0}
-SCALE_RANGE = (0.0, 100.0)           # bag_mass_told, bag_stiffness_scale, bag_damping_scale
+SCALE_RANGE = (0.0, 100.0)           # bag_mass_told, bag/handle stiffness scales, bag_damping_scale
 MAX_FORCE = 100.0                    # N, a disturbance pulse
 MAX_DURATION = 60.0                  # s, a disturbance pulse
 MAX_TIME = 1e6                       # s
@@ -130,6 +130,8 @@ class Realism:
       model as built: fem (both solvers) elastic_stiffness / damping of the mass-spring mesh;
       constraint the handle constraints' max_force (stiffness; no damping to scale); composite
       the block ties' max_force (stiffness; no damping); rigid nothing (a rigid box).
+      handle_stiffness_scale scales the grasp's stiffnesses (astrobee_sim.grasp: the strap's
+      hold and twist spring, the hinge's and the clamp's holds; config/bags.yaml grasp).
     """
 
     ekf_position_noise: float = 0.0
@@ -144,6 +146,7 @@ class Realism:
     bag_mass_told: float = 1.0
     bag_stiffness_scale: float = 1.0
     bag_damping_scale: float = 1.0
+    handle_stiffness_scale: float = 1.0
 
     # ---- what is on ---------------------------------------------------------------------
     @property
@@ -161,7 +164,7 @@ class Realism:
     def physical(self) -> bool:
         """Any knob the simulator's physics or EKF has to model (all but bag_mass_told)."""
         return (self.ekf_noisy or self.affects_stepping or self.bag_stiffness_scale != 1.0
-                or self.bag_damping_scale != 1.0)
+                or self.bag_damping_scale != 1.0 or self.handle_stiffness_scale != 1.0)
 
     @property
     def enabled(self) -> bool:
@@ -191,7 +194,8 @@ class Realism:
         for name, hi in MAX_NOISE.items():
             if name in d:
                 values[name] = _number(name, d[name], 0.0, hi)
-        for name in ("bag_mass_told", "bag_stiffness_scale", "bag_damping_scale"):
+        for name in ("bag_mass_told", "bag_stiffness_scale", "bag_damping_scale",
+                     "handle_stiffness_scale"):
             if name in d:
                 values[name] = _number(name, d[name], *SCALE_RANGE,
                                        lo_open=name != "bag_mass_told")

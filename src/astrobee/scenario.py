@@ -29,6 +29,16 @@ def default_fem_solver() -> str:
     return str(config.bags().get("models", {}).get("fem", {}).get("solver", "fast"))
 
 
+def grasp_names() -> tuple[str, ...]:
+    """The grasp models of config/bags.yaml (grasp.models; astrobee_sim.grasp implements them)."""
+    return tuple((config.bags().get("grasp") or {}).get("models") or ("strap", "hinge", "clamp"))
+
+
+def default_grasp() -> str:
+    """The grasp a bag gets when none is named (config/bags.yaml grasp.default)."""
+    return str((config.bags().get("grasp") or {}).get("default", "strap"))
+
+
 def _vec(value: Any, n: int, what: str) -> tuple[float, ...]:
     try:
         arr = np.asarray(value, dtype=float).reshape(-1)
@@ -66,6 +76,7 @@ class BagSpec:
     mass: float = 10.0
     resolution: int = 0            # FEM target node count; 0 = bags.yaml's
     solver: str = field(default_factory=default_fem_solver)   # FEM: fast (default) | bullet (reference)
+    grasp: str = field(default_factory=default_grasp)         # strap (default) | hinge | clamp
 
     def validate(self) -> None:
         if self.model not in BAG_MODELS:
@@ -75,6 +86,8 @@ class BagSpec:
                                 f"{', '.join(bag_variants())}")
         if self.solver not in FEM_SOLVERS:
             raise ScenarioError(f"unknown fem solver {self.solver!r}; known: {', '.join(FEM_SOLVERS)}")
+        if self.grasp not in grasp_names():
+            raise ScenarioError(f"unknown grasp {self.grasp!r}; known: {', '.join(grasp_names())}")
         if not all(0.05 <= s <= 2.0 for s in self.size):
             raise ScenarioError(f"bag size must be 0.05..2 m per side, got {list(self.size)}")
         if not MASS_RANGE[0] <= self.mass <= MASS_RANGE[1]:
@@ -93,6 +106,7 @@ class BagSpec:
             d["resolution"] = self.resolution
         if self.model == "fem":
             d["solver"] = self.solver
+        d["grasp"] = self.grasp
         return d
 
 
@@ -164,7 +178,8 @@ class Scenario:
                           _vec(raw_bag.get("size", default["size"]), 3, "bag size"),
                           float(raw_bag.get("mass", default["mass"])),
                           int(raw_bag.get("resolution", 0) or 0),
-                          str(raw_bag.get("solver") or default_fem_solver()))
+                          str(raw_bag.get("solver") or default_fem_solver()),
+                          str(raw_bag.get("grasp") or default_grasp()))
             bag.validate()
             if bag.handles != len(robots) and bag.handles == 2 and len(robots) == 1:
                 pass   # a two-handle bag held by one robot: the second handle hangs free

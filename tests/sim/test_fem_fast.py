@@ -30,7 +30,9 @@ SWING_TOL = 2.0     # deg, bag rotation from its start (how far it swung about t
 
 def fly(solver: str, motion, ticks: int = 300) -> np.ndarray:
     """Per tick: bag COM (3), extent (3), robot position (3), bag rotation from the start (deg)."""
-    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=RES, fem_solver=solver)
+    # the two solvers held the same way: the clamp (their strap/hinge pin different node sets)
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=RES, fem_solver=solver,
+                     grasp="clamp")
     try:
         q0 = sim.bag.state().orientation
         out = []
@@ -109,7 +111,9 @@ def fly_flight(solver: str, seconds: float, traj, mode) -> np.ndarray:
     """Per 16 ms tick: time, bag COM (3), extent (3), robot position (3)."""
     from astrobee_control import mass as mp
     from astrobee_control.pd import PdTracker, State
-    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=RES, fem_solver=solver)
+    # the two solvers held the same way: the clamp (their strap/hinge pin different node sets)
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=RES, fem_solver=solver,
+                     grasp="clamp")
     try:
         bag, robot = sim.scenario.bag, mp.robot()
         tracker = PdTracker(mode, robot)
@@ -214,7 +218,10 @@ def test_snapshot_restore_continues_bit_identically():
 
 
 def test_batched_rollout():
-    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=200, fem_solver="fast")
+    # clamp: the handle nodes themselves are held at the gripper (asserted below); the strap's
+    # rollout is in tests/sim/test_grasp.py
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=200, fem_solver="fast",
+                     grasp="clamp")
     try:
         drive(sim, 20)
         ro = FemRollout.from_bag(sim.bag, sim.robots[""], 4, sim.dt)

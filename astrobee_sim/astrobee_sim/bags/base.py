@@ -89,8 +89,17 @@ class Bag(ABC):
     model = "base"
 
     def __init__(self, client: int, variant: str = "front", size=None, mass: float | None = None,
-                 **params):
+                 grasp: str | None = None, handle_stiffness_scale: float = 1.0, **params):
+        """grasp: a model of astrobee_sim.grasp (None: bags.yaml's default), its stiffnesses
+        times handle_stiffness_scale; BagError for an unknown name."""
         import pybullet as p
+        from ..grasp import GraspError, make_grasp
+        try:
+            self.grasp_model = make_grasp(grasp, handle_stiffness_scale,
+                                          stiffness=params.pop("anchor_stiffness", None),
+                                          damping=params.pop("anchor_damping", None))
+        except GraspError as exc:
+            raise BagError(str(exc)) from None
         self.p, self.client = p, client
         cfg = config.bags()
         self.variant = variant
@@ -104,6 +113,11 @@ class Bag(ABC):
         self.robots: list = []
 
     # ---- geometry ----------------------------------------------------------------------
+    def strap_axis(self, k: int) -> np.ndarray:
+        """Unit long axis of handle k's strap, bag frame."""
+        from ..grasp import strap_axis
+        return strap_axis(self.size, self.handles[k])
+
     def handle_point(self, k: int) -> np.ndarray:
         """Outer grasp point of handle k in the bag frame."""
         h = self.handles[k]

@@ -16,7 +16,8 @@ from astrobee import config
 from astrobee import rotations as rot
 
 from .base import Bag, BagState, quat_from_matrix
-from .mass_spring import Anchors, MassSpring
+from ..grasp import twist_forces
+from .mass_spring import Anchors, MassSpring, Tethers
 from .mesh import bag_mesh
 from .node_contacts import collide_moving_boxes, collide_static_boxes, grow_boxes
 
@@ -74,9 +75,6 @@ class FastFemBag(Bag):
         self.friction = float(self.params.get("friction", 0.5))
         self.margin = float(self.params.get("collision_margin", 0.006))
         self._walls_grown = grow_boxes(self.walls, self.margin)
-        # total anchor stiffness/damping per handle (N/m, N s/m), spread over its nodes
-        self.anchor_k = float(self.params.get("anchor_stiffness", 5000.0))
-        self.anchor_c = float(self.params.get("anchor_damping", 20.0))
         self.half = robot_box_half()
         self._rest_mean = self.mesh.nodes.mean(axis=0)
         self._rest_centred = self.mesh.nodes - self._rest_mean
@@ -86,7 +84,9 @@ class FastFemBag(Bag):
         self._t = 0.0
         self._grasps: list[dict] = []                 # robot, nodes, offsets (gripper frame)
         self._anchors: Anchors | None = None
+        self._tethers: Tethers | None = None
         self._target = self._target_vel = None
+        self._tether_target = self._tether_vel = None
         self._pending: list = []                      # per robot: (id, link, F, at, tau, Fc, com, tauc)
         self._state: BagState | None = None
         self.last_penetration = 0.0
@@ -117,12 +117,31 @@ class FastFemBag(Bag):
         return np.array(ls[4]), R, np.array(ls[0]), np.array(ls[6]), np.array(ls[7])
 
     def grasp(self, k: int, robot) -> None:
-        nodes = np.asarray(self.mesh.handle_nodes[k], dtype=int)
+        """Tie handle k as the grasp model says (astrobee_sim.grasp): per-node springs, centroid
+        springs on node groups, the twist spring; every point fixed in the gripper frame."""
+        hold = self.grasp_model.fem_hold(self.mesh.nodes, np.asarray(self.mesh.handle_nodes[k]),
+                                         self.handle_point(k), self.strap_axis(k))
         pos, R, _, _, _ = self._gripper(robot)
-        offsets = (self.x[nodes, 0, :] - pos) @ R            # gripper frame
-        self._grasps.append({"robot": robot, "nodes": nodes, "offsets": offsets})
+        x = self.x[:, 0, :]
+        g = {"robot": robot, "hold": hold,
+             "offsets": (x[hold.anchors] - pos) @ R,                  # gripper frame
+             "tether_offsets": np.array([x[t].mean(axis=0) - pos for t in hold.tethers]
+                                        ).reshape(-1, 3) @ R}
+        if hold.twist is not None:
+            a, b = hold.twist
+            e = x[a].mean(axis=0) - x[b].mean(axis=0)
+            st = self._pose_now()
+            n = rot.rotate(st, self.handles[k])
+            g["u"] = (e / np.linalg.norm(e)) @ R
+            g["n"] = n @ R
+        self._grasps.append(g)
         self._rebuild_anchors()
         self._targets()
+
+    def _pose_now(self) -> np.ndarray:
+        """Bag orientation from the nodes (no velocity bookkeeping)."""
+        x = self.x[:, 0, :]
+        return quat_from_matrix(best_fit_rotation(self._rest_centred, x - x.mean(axis=0)))
 
     def attach(self, robots: list) -> None:
         self._contact_robots = list(robots)          # every robot's body collides with the bag
@@ -131,28 +150,40 @@ class FastFemBag(Bag):
     def release(self) -> None:
         self._grasps = []
         self._anchors = None
+        self._tethers = None
+        self._tether_target = self._tether_vel = None
         self._pending = []
         self.attached = [False] * len(self.handles)
 
     def _rebuild_anchors(self) -> None:
-        nodes = np.concatenate([g["nodes"] for g in self._grasps])
-        ka = np.concatenate([np.full(len(g["nodes"]), self.anchor_k / len(g["nodes"]))
-                             for g in self._grasps])
-        ca = np.concatenate([np.full(len(g["nodes"]), self.anchor_c / len(g["nodes"]))
-                             for g in self._grasps])
+        holds = [g["hold"] for g in self._grasps]
+        nodes = np.concatenate([h.anchors for h in holds]).astype(int)
+        ka = np.concatenate([np.full(len(h.anchors), h.anchor_stiffness) for h in holds])
+        ca = np.concatenate([np.full(len(h.anchors), h.anchor_damping) for h in holds])
         self._anchors = Anchors(nodes, ka, ca)
+        groups = [t for h in holds for t in h.tethers]
+        self._tethers = Tethers(groups, np.array([h.tether_stiffness for h in holds
+                                                  for _ in h.tethers]),
+                                np.array([h.tether_damping for h in holds for _ in h.tethers])
+                                ) if groups else None
 
     def _targets(self) -> list:
-        """Anchor targets and their velocities from the grippers' current state."""
-        tgt, vel, grip = [], [], []
+        """Anchor and tether targets and their velocities from the grippers' current state;
+        returns per grasp (gripper COM, gripper rotation, gripper omega)."""
+        tgt, vel, ttg, tvel, grip = [], [], [], [], []
         for g in self._grasps:
             pos, R, com, vcom, w = self._gripper(g["robot"])
             t = pos + g["offsets"] @ R.T
             tgt.append(t)
             vel.append(vcom + np.cross(w, t - com))
-            grip.append(com)
+            t = pos + g["tether_offsets"] @ R.T
+            ttg.append(t)
+            tvel.append(vcom + np.cross(w, t - com))
+            grip.append((com, R, w))
         self._target = np.concatenate(tgt)[:, None, :]
         self._target_vel = np.concatenate(vel)[:, None, :]
+        self._tether_target = np.concatenate(ttg)[:, None, :]
+        self._tether_vel = np.concatenate(tvel)[:, None, :]
         return grip
 
     # ---- stepping --------------------------------------------------------------------------
@@ -172,15 +203,30 @@ class FastFemBag(Bag):
         self._t += dt
         x, v = self.x, self.v
         grip = self._targets() if self._grasps else []
+        external, twist_tau = self.external, []
+        for g, (_, R, w) in zip(self._grasps, grip):
+            hold = g["hold"]
+            if hold.twist is None:
+                twist_tau.append(None)
+                continue
+            a, b = hold.twist
+            fa, tau = twist_forces(x, v, a, b, (R @ g["n"])[None], (R @ g["u"])[None], w[None],
+                                   hold.twist_stiffness, hold.twist_damping)
+            if external is self.external:
+                external = np.zeros_like(x) if external is None else external.copy()
+            external[a] += fa / len(a)
+            external[b] -= fa / len(b)
+            twist_tau.append(tau[0])
         x_prev = x.copy()
-        self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel, self.external)
+        self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel, external,
+                          self._tethers, self._tether_target, self._tether_vel)
         flat_x, flat_v = x.reshape(-1, 3), v.reshape(-1, 3)
         self.last_penetration = collide_static_boxes(flat_x, flat_v, x_prev.reshape(-1, 3),
                                                      self.walls, self.margin, self.friction,
                                                      self._walls_grown)
         robots = getattr(self, "_contact_robots", None) or self.robots or []
         pending = []
-        skip = self._anchors.nodes if self._anchors is not None else None
+        skip = self._held_nodes()
         for r in robots:
             pos, q, vel, w = r.state()
             rmat = np.array(self.p.getMatrixFromQuaternion(q.tolist())).reshape(1, 3, 3)
@@ -191,22 +237,40 @@ class FastFemBag(Bag):
                             fc[0].tolist() if fc.any() else None, pos.tolist(), tc[0].tolist()])
         if self._grasps:
             fa = self.springs.anchor_forces(x, v, self._anchors, self._target, self._target_vel)[:, 0]
-            start = 0
-            for g, com in zip(self._grasps, grip):
-                n = len(g["nodes"])
-                fi, ti = fa[start:start + n], self._target[start:start + n, 0]
-                start += n
+            ft = (self.springs.tether_forces(x, v, self._tethers, self._tether_target,
+                                             self._tether_vel)[:, 0]
+                  if self._tethers is not None else np.zeros((0, 3)))
+            sa = st = 0
+            for g, (com, _, _), tt in zip(self._grasps, grip, twist_tau):
+                na, nt = len(g["hold"].anchors), len(g["hold"].tethers)
+                fi = np.concatenate([fa[sa:sa + na], ft[st:st + nt]])
+                ti = np.concatenate([self._target[sa:sa + na, 0], self._tether_target[st:st + nt, 0]])
+                sa, st = sa + na, st + nt
+                torque = np.cross(ti - com, fi).sum(axis=0)
+                if tt is not None:
+                    torque = torque + tt
                 k = robots.index(g["robot"]) if g["robot"] in robots else None
                 entry = pending[k] if k is not None else [g["robot"].id, None, None, None, None,
                                                           None, None, None]
                 entry[1] = g["robot"].links["gripper"]
                 entry[2] = fi.sum(axis=0).tolist()
                 entry[3] = com.tolist()
-                entry[4] = np.cross(ti - com, fi).sum(axis=0).tolist()
+                entry[4] = torque.tolist()
                 if k is None:
                     pending.append(entry)
         self._pending = pending
         self._state = None
+
+    def _held_nodes(self) -> np.ndarray | None:
+        """Nodes that never collide with the robots: every handle node held by a grasp."""
+        if not self._grasps:
+            return None
+        memo = getattr(self, "_held_memo", None)
+        if memo is None or memo[0] is not self._anchors:
+            held = [g["hold"].anchors for g in self._grasps]
+            held += [t for g in self._grasps for t in g["hold"].tethers]
+            memo = self._held_memo = (self._anchors, np.unique(np.concatenate(held)).astype(int))
+        return memo[1]
 
     # ---- state -----------------------------------------------------------------------------
     def state(self) -> BagState:
@@ -237,7 +301,9 @@ class FastFemBag(Bag):
                 "pending": [[list(e) if isinstance(e, list) else e for e in row]
                             for row in self._pending],
                 "target": None if self._target is None else self._target.copy(),
-                "target_vel": None if self._target_vel is None else self._target_vel.copy()}
+                "target_vel": None if self._target_vel is None else self._target_vel.copy(),
+                "tether_target": None if self._tether_target is None else self._tether_target.copy(),
+                "tether_vel": None if self._tether_vel is None else self._tether_vel.copy()}
 
     def restore(self, snap) -> None:
         """Exact: node positions, velocities and the forces pending for the robots."""
@@ -248,4 +314,6 @@ class FastFemBag(Bag):
                          for row in snap["pending"]]
         self._target = None if snap["target"] is None else snap["target"].copy()
         self._target_vel = None if snap["target_vel"] is None else snap["target_vel"].copy()
+        self._tether_target = None if snap["tether_target"] is None else snap["tether_target"].copy()
+        self._tether_vel = None if snap["tether_vel"] is None else snap["tether_vel"].copy()
         self._state = None

@@ -3,7 +3,8 @@
 The robot is one rigid body (whole-robot mass and inertia from config/astrobee.yaml, the arm held
 rigid, the gripper a fixed point of the body) whose collision box (centred on the body frame's
 origin, as in robot.py's URDF) collides with the wall slabs (rigid_walls.BoxWalls); the bag is
-mass_spring's model with the same anchor springs, wall-slab and robot-box contacts as
+mass_spring's model held as the bag's grasp model holds it (anchor springs, tethers, the
+strap's twist spring), with the same wall-slab and robot-box contacts as
 fem_fast.FastFemBag. All copies share one factored matrix: a step is a few array operations
 over (N, K, 3) plus one matrix product.
 """
@@ -13,7 +14,8 @@ import numpy as np
 
 from astrobee import config
 
-from .mass_spring import Anchors, MassSpring
+from ..grasp import twist_forces
+from .mass_spring import Anchors, MassSpring, Tethers
 from .node_contacts import collide_moving_boxes, collide_static_boxes, grow_boxes
 from .rigid_walls import BoxWalls
 
@@ -32,12 +34,23 @@ class FemRollout:
     def __init__(self, springs: MassSpring, anchors: Anchors, grip_offsets: np.ndarray,
                  walls: np.ndarray, box_half: np.ndarray, k: int, dt: float,
                  margin: float = 0.006, friction: float = 0.5, robot_walls: bool = True,
-                 robot_friction: float = 0.25):
+                 robot_friction: float = 0.25, tethers: Tethers | None = None,
+                 tether_offsets: np.ndarray | None = None, twist: dict | None = None):
         """robot_walls False: the robot body passes through the walls (the bag still collides);
-        robot_friction: robot-wall Coulomb friction (Bullet's 0.5 x 0.5 of pybullet's run)."""
+        robot_friction: robot-wall Coulomb friction (Bullet's 0.5 x 0.5 of pybullet's run).
+        tethers / tether_offsets (G, 3 body frame, from COM): node groups held by their
+        centroids; twist: the strap's twist spring (a, b node groups, u and n body-frame unit
+        vectors, k, c; astrobee_sim.grasp.twist_forces)."""
         cfg = config.astrobee()
         self.springs, self.anchors = springs, anchors
-        self.offsets = np.asarray(grip_offsets, dtype=float)      # (A, 3) body frame, from COM
+        self.offsets = np.asarray(grip_offsets, dtype=float).reshape(-1, 3)   # (A, 3) body, from COM
+        self.tethers = tethers
+        self.tether_offsets = (np.zeros((0, 3)) if tether_offsets is None
+                               else np.asarray(tether_offsets, dtype=float).reshape(-1, 3))
+        self.twist = twist
+        self._held = np.unique(np.concatenate([np.asarray(anchors.nodes, dtype=int)]
+                                              + ([np.asarray(g, dtype=int) for g in tethers.groups]
+                                                 if tethers is not None else []))).astype(int)
         self.walls, self.half = np.asarray(walls, dtype=float), np.asarray(box_half, dtype=float)
         self.k, self.dt, self.margin, self.friction = int(k), float(dt), margin, friction
         self.mass = float(cfg["mass"])
@@ -61,17 +74,29 @@ class FemRollout:
     @classmethod
     def from_bag(cls, bag, robot, k: int, dt: float, **kw) -> "FemRollout":
         """K copies of a FastFemBag and the robot holding its first handle, in their current
-        state (the robot's velocity and spin included); kw: the constructor's options."""
+        state (the robot's velocity and spin included) and held by the bag's grasp model;
+        kw: the constructor's options."""
         from .fem_fast import quat_matrices
         pos, q, vel, w = robot.state()
         com = robot.com()
         R = quat_matrices(q[None])[0]
         g = bag._grasps[0]
-        t = bag._target[: len(g["nodes"]), 0]
-        anchors = Anchors(g["nodes"], bag._anchors.stiffness[: len(g["nodes"])],
-                          bag._anchors.damping[: len(g["nodes"])])
+        hold = g["hold"]
+        na, nt = len(hold.anchors), len(hold.tethers)
+        anchors = Anchors(hold.anchors, bag._anchors.stiffness[:na], bag._anchors.damping[:na])
+        tethers = (Tethers(list(hold.tethers), bag._tethers.stiffness[:nt],
+                           bag._tethers.damping[:nt]) if nt else None)
+        t = bag._target[:na, 0]
+        tt = bag._tether_target[:nt, 0] if nt else np.zeros((0, 3))
+        twist = None
+        if hold.twist is not None:
+            _, Rg, _, _, _ = bag._gripper(robot)
+            twist = {"a": hold.twist[0], "b": hold.twist[1], "u": R.T @ (Rg @ g["u"]),
+                     "n": R.T @ (Rg @ g["n"]), "k": hold.twist_stiffness,
+                     "c": hold.twist_damping}
         ro = cls(bag.springs, anchors, (t - com) @ R, bag.walls, bag.half, k, dt,
-                 bag.margin, bag.friction, **kw)
+                 bag.margin, bag.friction, tethers=tethers, tether_offsets=(tt - com) @ R,
+                 twist=twist, **kw)
         ro.x[...] = bag.x
         ro.v[...] = bag.v
         ro.pos[...] = com
@@ -124,13 +149,26 @@ class FemRollout:
             if self.robot_walls is not None:
                 d = self.robot_walls.collide(self.pos, R, self.vel, self.omega, pos_prev, R_prev)
                 np.maximum(self.wall_depth, d, out=self.wall_depth)
-            # anchor targets on the (rigid) gripper
+            # anchor and tether targets on the (rigid) gripper
             arm = np.einsum("kij,aj->aki", R, self.offsets)            # (A, K, 3)
             target = self.pos[None] + arm
             target_vel = self.vel[None] + np.cross(self.omega[None], arm)
+            tarm = np.einsum("kij,aj->aki", R, self.tether_offsets)    # (G, K, 3)
+            ttarget = self.pos[None] + tarm
+            tvel = self.vel[None] + np.cross(self.omega[None], tarm)
             x, v = self.x, self.v
+            external, twist_tau = None, 0.0
+            if self.twist is not None:
+                tw = self.twist
+                a, b = tw["a"], tw["b"]
+                fa, twist_tau = twist_forces(x, v, a, b, R @ tw["n"], R @ tw["u"], self.omega,
+                                             tw["k"], tw["c"])
+                external = np.zeros_like(x)
+                external[a] += fa / len(a)
+                external[b] -= fa / len(b)
             x_prev = x.copy()
-            self.springs.step(x, v, h, self.anchors, target, target_vel)
+            self.springs.step(x, v, h, self.anchors, target, target_vel, external,
+                              self.tethers, ttarget, tvel)
             collide_static_boxes(x.reshape(-1, 3), v.reshape(-1, 3), x_prev.reshape(-1, 3),
                                  self.walls, self.margin, self.friction, self._walls_grown)
             # the body box is centred on the body frame's origin, not on the COM
@@ -138,8 +176,12 @@ class FemRollout:
             fc, tc = collide_moving_boxes(x, v, x_prev, self.pos + box, R,
                                           self.vel + np.cross(self.omega, box), self.omega,
                                           self.half, self.margin, self.friction,
-                                          self.springs.node_mass, h, self.anchors.nodes)
+                                          self.springs.node_mass, h, self._held)
             fa = self.springs.anchor_forces(x, v, self.anchors, target, target_vel)
             self.force = fa.sum(axis=0) + fc
-            self.torque = np.cross(arm, fa).sum(axis=0) + tc + np.cross(box, fc)
+            self.torque = np.cross(arm, fa).sum(axis=0) + tc + np.cross(box, fc) + twist_tau
+            if self.tethers is not None:
+                ft = self.springs.tether_forces(x, v, self.tethers, ttarget, tvel)
+                self.force += ft.sum(axis=0)
+                self.torque += np.cross(tarm, ft).sum(axis=0)
             self.time += h

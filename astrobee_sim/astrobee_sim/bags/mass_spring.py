@@ -128,6 +128,20 @@ class Anchors:
         return (self.nodes.tobytes(), self.stiffness.tobytes(), self.damping.tobytes())
 
 
+@dataclass
+class Tethers:
+    """Node groups each held by its centroid: an implicit spring + damper pulls the group's mean
+    position toward a target point, the force spread equally over the group (a ball joint at the
+    centroid that leaves the group free to turn about it; astrobee_sim.grasp's strap and hinge)."""
+    groups: list              # G arrays of node indices
+    stiffness: np.ndarray     # (G,) N/m per group
+    damping: np.ndarray       # (G,) N s/m per group
+
+    def key(self) -> tuple:
+        return (tuple(np.asarray(g).tobytes() for g in self.groups), self.stiffness.tobytes(),
+                self.damping.tobytes())
+
+
 class MassSpring:
     """Springs on the tet edges of a mesh (+ Bullet's bending springs) with `mass` spread
     equally over the nodes; damping along the springs ("spring", Bullet's) or in all
@@ -192,20 +206,30 @@ class MassSpring:
         return self.damping * (dv - u * along[:, :, None])
 
     # ---- implicit solve ------------------------------------------------------------------
-    def solver(self, h: float, anchors: Anchors | None, columns: int = 3):
-        """The factored matrix M + h c L + diag(h^2 ka + h ca) (cached per step and anchors).
+    def solver(self, h: float, anchors: Anchors | None, columns: int = 3,
+               tethers: Tethers | None = None):
+        """The factored matrix M + h c L + diag(h^2 ka + h ca) + the tethers' blocks
+        (h^2 K + h C) / n^2 over each group's n x n nodes (cached per step, anchors, tethers).
 
         Few right-hand sides (one bag): a sparse LU. Many (K copies): the dense inverse, whose
         product with all 3K columns is one BLAS matrix product (several times faster than
         SuperLU's column-by-column triangular solves at K = 64)."""
         dense = columns >= 48 and self.n <= 3000
-        key = (h, None if anchors is None else anchors.key(), dense)
+        key = (h, None if anchors is None else anchors.key(), dense,
+               None if tethers is None else tethers.key())
         lu = self._lu.get(key)
         if lu is None:
             diag = np.full(self.n, self.node_mass)
             if anchors is not None and len(anchors.nodes):
                 np.add.at(diag, anchors.nodes, h * h * anchors.stiffness + h * anchors.damping)
-            a = (sp.diags(diag) + (h * self.damping) * self.laplacian).tocsc()
+            a = sp.diags(diag) + (h * self.damping) * self.laplacian
+            if tethers is not None:
+                for g, kt, ct in zip(tethers.groups, tethers.stiffness, tethers.damping):
+                    g = np.asarray(g)
+                    r, c = np.meshgrid(g, g, indexing="ij")
+                    val = np.full(r.size, (h * h * kt + h * ct) / len(g) ** 2)
+                    a = a + sp.csr_matrix((val, (r.ravel(), c.ravel())), shape=a.shape)
+            a = a.tocsc()
             if dense:
                 lu = _DenseInverse(np.linalg.inv(a.toarray()))
             else:
@@ -218,11 +242,14 @@ class MassSpring:
 
     def step(self, x: np.ndarray, v: np.ndarray, h: float, anchors: Anchors | None = None,
              target: np.ndarray | None = None, target_vel: np.ndarray | None = None,
-             external: np.ndarray | None = None) -> None:
+             external: np.ndarray | None = None, tethers: Tethers | None = None,
+             tether_target: np.ndarray | None = None,
+             tether_vel: np.ndarray | None = None) -> None:
         """One step in place: v <- solve(M v + h f(x) + anchor terms), x <- x + h v.
 
         target / target_vel: (A, K, 3) where each anchored node is pulled to / moves with.
-        external: optional (N, K, 3) extra forces held over the step."""
+        external: optional (N, K, 3) extra forces held over the step.
+        tethers: node groups held by their centroids at tether_target / tether_vel (G, K, 3)."""
         n, k, _ = x.shape
         across = self.damping_mode == "spring" and self.damping > 0
         u = None
@@ -245,7 +272,12 @@ class MassSpring:
             idx = anchors.nodes
             rhs[idx] += h * (anchors.stiffness[:, None, None] * (target - x[idx])
                              + anchors.damping[:, None, None] * target_vel)
-        lu = self.solver(h, anchors, 3 * k)
+        if tethers is not None:
+            for i, g in enumerate(tethers.groups):
+                f = (tethers.stiffness[i] * (tether_target[i] - x[g].mean(axis=0))
+                     + tethers.damping[i] * tether_vel[i])
+                rhs[g] += (h / len(g)) * f
+        lu = self.solver(h, anchors, 3 * k, tethers)
         new = lu.solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
         if u is not None and self.damping_iterations > 1:
             base = rhs + h * self._to_nodes(self._cross_damping(u, dv))   # without the correction
@@ -261,3 +293,10 @@ class MassSpring:
         idx = anchors.nodes
         return (anchors.stiffness[:, None, None] * (x[idx] - target)
                 + anchors.damping[:, None, None] * (v[idx] - target_vel))
+
+    def tether_forces(self, x: np.ndarray, v: np.ndarray, tethers: Tethers, target: np.ndarray,
+                      target_vel: np.ndarray) -> np.ndarray:
+        """(G, K, 3) force each tether exerts on what holds it (the gripper)."""
+        return np.stack([tethers.stiffness[i] * (x[g].mean(axis=0) - target[i])
+                         + tethers.damping[i] * (v[g].mean(axis=0) - target_vel[i])
+                         for i, g in enumerate(tethers.groups)])
