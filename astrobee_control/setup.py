@@ -25,6 +25,12 @@ setup(
             'pd_controller_node = astrobee_control.pd_controller_node:main',
             'mpc_controller_node = astrobee_control.mpc_controller_node:main',
             'safety_filter_node = astrobee_control.safety_filter_node:main',
+            'controller_node = astrobee_control.controller_node:generic_main',
+        ],
+        # the controller registry (astrobee_control.registry), as pyproject.toml declares it
+        "astrobee.controllers": [
+            'pd = astrobee_control.tracking:CONTROLLER',
+            'mpc = astrobee_control.mpc:CONTROLLER',
         ],
     },
 )

@@ -41,20 +41,17 @@ from astrobee import flight_modes
 from astrobee import msgconv as mc
 from astrobee import rotations as rot
 from astrobee.overrides import MASS_RANGE
-from astrobee.flight_modes import FlightMode
 from roszen import node_main
 from roszen.peers import PublisherWatch
 from roszen.parameters import read_only, runtime
 
 from . import mass as mp
-from .law import BagObservation, ControlLaw
-from .mass import MassProperties
+from .law import BagObservation, ControlLaw, LawFactory
 from .pd import State
 from .reference import from_control_states
 
 JUMP_DISTANCE = 0.5  # m between two state samples: a reset, not motion
 CLOCK_HEARTBEAT = 1.5  # wall s: a paused sim's /clock comes once a second (sim_node)
-LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]
 
 # parameters every controller node declares (name -> default)
 COMMON_PARAMETERS: dict[str, Any] = {
@@ -572,3 +569,31 @@ def main(make_law: LawFactory, node_name: str, parameters: dict[str, Any] | None
     `parameters` (name -> default) are declared as ROS parameters and handed to make_law, which
     raises ValueError with one line for bad values (the node then exits 1 with that line)."""
     return node_main.run(lambda a: ControllerNode(make_law, node_name, parameters, a), argv)
+
+
+def run_registered(name: str, argv: list[str] | None = None) -> int:
+    """Entry point body of the registered law `name` (astrobee_control.registry): its factory
+    and parameters on a node named <name>_controller_node (unless remapped)."""
+    from .registry import get
+    law = get(name)
+    return main(law.make_law, law.node_name, dict(law.params()), argv)
+
+
+def generic_main(argv: list[str] | None = None) -> int:
+    """`controller_node LAW [--ros-args ...]`: any registered law by name (the launcher runs a
+    law that has no executable of its own this way)."""
+    import sys
+    from .registry import UnknownController, get
+    argv = sys.argv if argv is None else argv
+    plain = [a for a in argv[1:argv.index("--ros-args") if "--ros-args" in argv else len(argv)]]
+    prog = "controller_node"
+    if len(plain) != 1:
+        print(f"{prog}: error: give the law's name: controller_node LAW [--ros-args ...]",
+              file=sys.stderr)
+        return 2
+    try:
+        get(plain[0])
+    except UnknownController as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    return run_registered(plain[0], argv)

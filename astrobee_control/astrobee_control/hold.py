@@ -7,11 +7,14 @@ from __future__ import annotations
 
 from astrobee.flight_modes import FlightMode
 
-from .law import BagObservation, carried_mass
+from astrobee.msgconv import MotionState
+
+from .law import BagObservation, Step, carried_mass
 from .mass import MassProperties
 from .pd import MODE_STOP, PdTracker, Reference, State
 from .reference import SampledTrajectory
-from .tracking import STOPPED, Step
+
+STOPPED = MotionState.STOPPED
 
 
 class HoldLaw:

@@ -22,7 +22,7 @@ Contract (times in seconds of sim time; frames as in pd.py):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -31,8 +31,21 @@ from astrobee.flight_modes import FlightMode
 
 from . import mass as mp
 from .mass import MassProperties
-from .pd import State
+from .pd import Output, Reference, State
 from .reference import SampledTrajectory
+
+
+@dataclass
+class Step:
+    """What one control tick of any law produces."""
+
+    output: Output
+    reference: Reference
+    control_mode: int
+    state: int                             # MotionState value after the tick
+    event: str                             # non-empty when the state changed this tick (why)
+    candidates: np.ndarray | None = None   # (N, T, 3) positions a sampling law considered
+    chosen: np.ndarray | None = None       # (T, 3) positions of the candidate it executes
 
 
 @dataclass
@@ -87,4 +100,9 @@ class ControlLaw(Protocol):
 
     def rehold(self, state: State, why: str) -> None: ...
 
-    def update(self, state: State, now: float, dt: float): ...
+    def update(self, state: State, now: float, dt: float) -> Step: ...
+
+
+# a law's factory: (flight mode, robot mass properties, its parameters, complete) -> the law;
+# ValueError with one line for a bad parameter
+LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]

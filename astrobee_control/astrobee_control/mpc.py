@@ -59,13 +59,14 @@ from astrobee_planning import bezier
 from astrobee_planning.local_planner import control_points
 
 from .clearance import KeepIn
-from .law import BagObservation
+from .law import BagObservation, Step
 from .mass import MassProperties
 from .pd import State
 from .reduced_model import (CandidateReferences, Gains, RolloutModel, RolloutStart,
                             _exp_so3, _log_so3, compound_inertia, rotate_by)
 from .reference import SampledTrajectory
-from .tracking import CONTROLLING, Step, Tracker
+from .registry import Controller
+from .tracking import CONTROLLING, SETTLE_TIME, Tracker, check_settle_time
 
 MODELS = ("reduced", "pybullet")
 HOLD_OMEGA = 0.02    # rad/s: below it (and near the final attitude) the pair is not held longer
@@ -165,7 +166,7 @@ class MpcLaw:
 
     def __init__(self, flight_mode: FlightMode, mass: MassProperties, model: RolloutModel,
                  config: MpcConfig | None = None, keep_in: np.ndarray | None = None,
-                 settle_time: float = 5.0) -> None:
+                 settle_time: float = SETTLE_TIME) -> None:
         from astrobee import config as cfg
         self.config = (config or MpcConfig()).validate()
         self.model = model
@@ -696,8 +697,9 @@ def _interp_quat(traj: SampledTrajectory, times: np.ndarray) -> np.ndarray:
 
 
 _CFG = asdict(MpcConfig())
-# the MPC's parameters beyond every controller's (name -> default): mpc_controller_node declares
-# them as ROS parameters, in-process flights (astrobee_lab) read them too
+# the MPC's parameters beyond every controller's (name -> default; MpcConfig owns the cost and
+# sampling defaults, this table the model's): its node declares them as ROS parameters,
+# in-process flights read them too
 PARAMETERS = {**{k: _CFG[k] for k in ("samples", "horizon", "replan_period", "rollout_dt",
                                       "sigma_position", "sigma_velocity", "w_track", "w_collision",
                                       "w_clearance", "clearance_margin", "w_effort", "w_relvel",
@@ -706,31 +708,51 @@ PARAMETERS = {**{k: _CFG[k] for k in ("samples", "horizon", "replan_period", "ro
                                       "w_delay", "max_deviation", "min_gain",
                                       "hold_about_centre")},
               "model": "reduced", "handle": "fem", "pybullet_bag": "constraint", "workers": 2,
-              "settle_time": 5.0}
+              "settle_time": SETTLE_TIME}
+
+
+def check_params(params: dict) -> MpcConfig:
+    """The MPC's parameters (PARAMETERS' names, missing ones at their defaults) checked without
+    building the law or its model (ValueError with one line); the MpcConfig they make."""
+    params = {**PARAMETERS, **params}
+    config = MpcConfig.from_params(params)
+    if str(params["model"]) not in MODELS:
+        raise ValueError(f"unknown model {params['model']!r}; known: {', '.join(MODELS)}")
+    w = params["workers"]
+    if isinstance(w, bool) or not isinstance(w, int) or w <= 0:
+        raise ValueError(f"workers must be a positive integer, got {w!r}")
+    check_settle_time(params["settle_time"])
+    return config
 
 
 def make_rollout_model(params: dict) -> RolloutModel:
-    """The rollout model the parameters name (ValueError with one line otherwise)."""
-    model = str(params.get("model", "reduced"))
+    """The rollout model the parameters name (missing ones at PARAMETERS' defaults; ValueError
+    with one line otherwise)."""
+    params = {**PARAMETERS, **params}
+    model = str(params["model"])
     if model == "reduced":
         from .reduced_model import ReducedModel, identified_handles
         handles = identified_handles()
-        name = str(params.get("handle", "fem"))
+        name = str(params["handle"])
         if name not in handles:
             raise ValueError(f"no identified handle {name!r} in config/reduced_models.yaml; "
                              f"known: {', '.join(handles) or 'none'}")
         return ReducedModel(handles[name], handles)
     if model == "pybullet":
         from .rollout_pybullet import PybulletModel
-        return PybulletModel(int(params.get("workers", 2)), str(params.get("pybullet_bag", "constraint")))
+        return PybulletModel(int(params["workers"]), str(params["pybullet_bag"]))
     raise ValueError(f"unknown model {model!r}; known: {', '.join(MODELS)}")
 
 
 def make_mpc_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> MpcLaw:
     """The MPC law of the parameters (PARAMETERS' names; ValueError with one line for a bad
     value). mpc_controller_node and in-process flights build their law here."""
-    config = MpcConfig.from_params(params)
-    settle = float(params.get("settle_time", 5.0))
-    if not settle > 0:
-        raise ValueError(f"settle_time must be > 0 s, got {settle:g}")
+    config = check_params(params)
+    settle = check_settle_time({**PARAMETERS, **params}["settle_time"])
     return MpcLaw(flight_mode, mass, make_rollout_model(params), config, settle_time=settle)
+
+
+# the registry entry (astrobee_control.registry; pyproject's astrobee.controllers group)
+CONTROLLER = Controller("mpc", make_mpc_law, PARAMETERS, check_params,
+                        "sampling MPC over a rollout model of robot + bag (reduced | pybullet)",
+                        executable="mpc_controller_node")

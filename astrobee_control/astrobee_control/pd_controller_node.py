@@ -1,19 +1,18 @@
-"""pd_controller_node: the PD tracker (tracking.Tracker) on controller_node.
+"""pd_controller_node: the PD law (registry entry `pd`: tracking.CONTROLLER) on controller_node.
 
 `ros2 run astrobee_control pd_controller_node --ros-args -p settle_time:=5.0`; the topics,
-services and common parameters are controller_node's.
+services and common parameters are controller_node's, the law's are tracking.PARAMETERS.
 """
 from __future__ import annotations
 
 import sys
 
-from . import controller_node
-from .tracking import PARAMETERS, make_law  # noqa: F401 - the law's factory lives with the law
+from .controller_node import run_registered
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (`ros2 run astrobee_control pd_controller_node`)."""
-    return controller_node.main(make_law, "pd_controller_node", PARAMETERS, argv)
+    return run_registered("pd", argv)
 
 
 if __name__ == "__main__":

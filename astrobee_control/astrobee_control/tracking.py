@@ -9,45 +9,35 @@ MotionState values follow NASA ff_msgs/MotionState. Life cycle:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
+from astrobee.msgconv import MotionState
 
-from .law import BagObservation, carried_mass
+from .law import BagObservation, Step, carried_mass  # noqa: F401 - Step: old import path
 from .mass import MassProperties
 from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdTracker, Reference, State
 from .reference import SampledTrajectory
+from .registry import Controller
 
-INITIALIZING, IDLE, STOPPED, IDLING, STOPPING = 0, 1, 2, 3, 4
-CONTROLLING = 9
-STATE_NAMES = {0: "INITIALIZING", 1: "IDLE", 2: "STOPPED", 3: "IDLING", 4: "STOPPING",
-               9: "CONTROLLING"}
+# the MotionState values this state machine uses (astrobee.msgconv owns them)
+INITIALIZING, IDLE, STOPPED = MotionState.INITIALIZING, MotionState.IDLE, MotionState.STOPPED
+IDLING, STOPPING, CONTROLLING = MotionState.IDLING, MotionState.STOPPING, MotionState.CONTROLLING
 
 STOP_SPEED = 0.01    # m/s: "at rest" when stopping
 STOP_OMEGA = 0.02    # rad/s
 
-# the PD law's parameters beyond every controller's (name -> default): pd_controller_node
-# declares them as ROS parameters, in-process flights (astrobee_lab) read them too
+SETTLE_TIME = 5.0    # s the end of a segment may take to come to rest within tolerance
+
+# the PD law's parameters beyond every controller's (name -> default; the one owner of these
+# defaults): its node declares them as ROS parameters, in-process flights read them too
 PARAMETERS = {
-    "settle_time": 5.0,       # s the end of a segment may take to come to rest within tolerance
+    "settle_time": SETTLE_TIME,
     "hold_on_start": True,    # hold the first pose seen (else IDLE: zero wrench until a segment)
 }
-
-
-@dataclass
-class Step:
-    """What one control tick produces."""
-
-    output: Output
-    reference: Reference
-    control_mode: int
-    state: int
-    event: str  # non-empty when the state changed this tick (why)
-    candidates: np.ndarray | None = None   # (N, T, 3) positions a sampling law considered
-    chosen: np.ndarray | None = None       # (T, 3) positions of the candidate it executes
 
 
 class Tracker:
@@ -56,7 +46,8 @@ class Tracker:
 
     name = "pd"
 
-    def __init__(self, flight_mode: FlightMode, mass: MassProperties, settle_time: float = 5.0,
+    def __init__(self, flight_mode: FlightMode, mass: MassProperties,
+                 settle_time: float = SETTLE_TIME,
                  hold_on_start: bool = True) -> None:
         self.pd = PdTracker(flight_mode, mass)
         self.robot_mass = mass
@@ -166,11 +157,29 @@ class Tracker:
         return Step(out, ref, mode, self.state, event)
 
 
+def check_settle_time(value: Any) -> float:
+    """A settle_time parameter (s, > 0), as a float; ValueError with one line otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        raise ValueError(f"settle_time must be > 0 s, got {value!r}")
+    return float(value)
+
+
+def check_params(params: dict) -> None:
+    """The PD law's parameters (complete), checked without building it."""
+    check_settle_time(params["settle_time"])
+    if not isinstance(params["hold_on_start"], bool):
+        raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")
+
+
 def make_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> Tracker:
     """The PD law of the parameters (PARAMETERS' names; ValueError with one line for a bad value).
     pd_controller_node and in-process flights build their law here."""
     params = {**PARAMETERS, **params}
-    settle = float(params["settle_time"])
-    if not settle > 0:
-        raise ValueError(f"settle_time must be > 0 s, got {settle:g}")
-    return Tracker(flight_mode, mass, settle_time=settle, hold_on_start=bool(params["hold_on_start"]))
+    return Tracker(flight_mode, mass, settle_time=check_settle_time(params["settle_time"]),
+                   hold_on_start=bool(params["hold_on_start"]))
+
+
+# the registry entry (astrobee_control.registry; pyproject's astrobee.controllers group)
+CONTROLLER = Controller("pd", make_law, PARAMETERS, check_params,
+                        "PD tracking of the segment (NASA gains of the flight mode)",
+                        executable="pd_controller_node")

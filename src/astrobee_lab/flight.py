@@ -4,8 +4,8 @@ control law in one loop, with no router and no processes.
 The loop mirrors the graph (sim_node in lockstep + planner_node + controller_node + mission):
 the planner is called as /mob/planner/global calls it (the robot's pose at the start, the
 scenario's goal, flight mode, face_forward and carry extent; sampled at planner_node's 10 Hz);
-the law is built by the same factory as the controller node (tracking.make_law /
-mpc.make_mpc_law over config/controllers.yaml's section) and sees the EKF state at 62.5 Hz,
+the law is built by the same registry entry as the controller node (astrobee_control.registry:
+the law's defaults, then config/controllers.yaml's section) and sees the EKF state at 62.5 Hz,
 the carried bag as controller_node builds it (BagObservation with the mass the robot is told),
 one tick late as on the graph; its body-frame wrench (optionally through the CBF safety filter,
 as safety_filter_node) is held for the physics steps up to the next tick (350 Hz); a
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from astrobee import config, flight_modes
+from astrobee import flight_modes
 from astrobee import rotations as rot
 from astrobee.overrides import parse_overrides
 from astrobee.scenario import Scenario
@@ -32,7 +32,6 @@ from astrobee.task import Task, TaskMonitor, TaskSample
 CONTROL_RATE = 62.5        # Hz: the sim's publish rate, one command per state
 PLAN_SAMPLE_RATE = 10.0    # Hz: planner_node's default segment sampling
 FAULT_WATCH = 0.5          # s a faulted flight is watched before it ends (as the mission)
-CONTROLLERS = ("pd", "mpc")
 
 
 @dataclass
@@ -82,21 +81,16 @@ class FlightObs:
 
 
 def make_controller(controller: str | Any, flight_mode, params: dict | None = None):
-    """The law a controller name stands for, built as its node builds it ('pd' | 'mpc': the
-    node's PARAMETERS, config/controllers.yaml's section, then `params`); a ControlLaw object,
-    or a callable (flight_mode, mass, params) -> law, is used as given."""
+    """The law a registered controller name stands for (astrobee_control.registry), built as
+    its node builds it (the law's defaults, config/controllers.yaml's section, then `params`);
+    a ControlLaw object, or a callable (flight_mode, mass, params) -> law, is used as given."""
     from astrobee_control import mass as mp
+    from astrobee_control import registry
     if isinstance(controller, str):
-        if controller not in CONTROLLERS:
-            raise ValueError(f"controller must be {' or '.join(CONTROLLERS)} or a ControlLaw, "
+        if controller not in registry.names():
+            raise ValueError(f"controller must be {registry.choices_text()} or a ControlLaw, "
                              f"got {controller!r}")
-        if controller == "pd":
-            from astrobee_control.tracking import PARAMETERS, make_law
-        else:
-            from astrobee_control.mpc import PARAMETERS
-            from astrobee_control.mpc import make_mpc_law as make_law
-        merged = {**PARAMETERS, **(config.controllers().get(controller) or {}), **(params or {})}
-        return make_law(flight_mode, mp.robot(), merged)
+        return registry.get(controller).make(flight_mode, mp.robot(), params)
     if callable(controller) and not hasattr(controller, "update"):
         return controller(flight_mode, mp.robot(), dict(params or {}))
     return controller
@@ -116,7 +110,7 @@ class Flight:
                  state_source: str = "ekf", task: dict | None = None,
                  physics_rate: float | None = None, plan: bool = True) -> None:
         """scenario: a name of config/scenarios (with the overrides, as the launch applies
-        them) or a Scenario as is. controller: 'pd' | 'mpc' | a ControlLaw | a factory.
+        them) or a Scenario as is. controller: a registered law's name ('pd', 'mpc', ...) | a ControlLaw | a factory.
         safety: the CBF filter between the law and the sim. realism: a preset name of
         config/realism.yaml, a mapping of knobs or an astrobee.realism.Realism (the scenario's
         otherwise). state_source: 'ekf' (the law sees the estimate) | 'truth'.

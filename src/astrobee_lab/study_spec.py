@@ -1,7 +1,7 @@
 """A study file (YAML) read, validated and expanded into the list of flights it asks for.
 
     name: pd_vs_mpc                    # the study folder is runs/study_<name>/
-    controllers:                       # labels -> a controller ('pd' | 'mpc'), its parameters
+    controllers:                       # labels -> a registered law (pd | mpc | ...), its params
       pd: {controller: pd}             #   (config/controllers.yaml's section under them) and
       mpc_a: {controller: mpc, params: {model: reduced}}      # safety (the CBF filter)
     base: {scenario: node2_to_jem_fem_bag, realism: astrobee} # every flight's parameters
@@ -52,7 +52,6 @@ OVERRIDES = tuple(k for k in OVERRIDE_KEYS if k not in ("realism", "robots"))
 FLIGHT_KEYS = {"scenario", "controller", "safety", *OVERRIDES, "realism", "state_source",
                "time_limit", "params"}
 DOTTED_ROOTS = {"realism", "params", "scenario"}
-CONTROLLER_KINDS = ("pd", "mpc")
 DISTRIBUTIONS = ("uniform", "loguniform", "choice", "randint")
 MAX_FLIGHTS = 100000
 
@@ -215,8 +214,9 @@ def _draw(rng: np.random.Generator, dist: Any, where: str) -> Any:
 
 def _controllers(raw: Any, where: str) -> dict[str, dict]:
     out: dict[str, dict] = {}
+    from astrobee_control import registry
     if raw is None:
-        raw = {k: {"controller": k} for k in CONTROLLER_KINDS}
+        raw = {k: {"controller": k} for k in registry.names()}
     if not isinstance(raw, dict) or not raw:
         raise StudyError(f"{where}: controllers must be a mapping label -> {{controller, params, "
                          f"safety}}, got {raw!r}")
@@ -226,8 +226,8 @@ def _controllers(raw: Any, where: str) -> dict[str, dict]:
             d = {"controller": d}
         _check_keys(d, {"controller", "params", "safety", "description"}, w)
         kind = d.get("controller", label)
-        if kind not in CONTROLLER_KINDS:
-            raise StudyError(f"{w}: controller must be {' or '.join(CONTROLLER_KINDS)}, got {kind!r}")
+        if kind not in registry.names():
+            raise StudyError(f"{w}: controller must be {registry.choices_text()}, got {kind!r}")
         params = d.get("params") or {}
         if not isinstance(params, dict):
             raise StudyError(f"{w}: params must be a mapping, got {params!r}")
@@ -239,20 +239,11 @@ def _controllers(raw: Any, where: str) -> dict[str, dict]:
 
 
 def _check_params(kind: str, params: dict, where: str) -> None:
-    """The controller's parameters as its factory would check them, without building it."""
+    """The controller's parameters as its registry entry checks them, without building it."""
+    from astrobee_control import registry
     try:
-        if kind == "mpc":
-            from astrobee_control.mpc import MODELS, MpcConfig
-            MpcConfig.from_params(params)
-            if str(params.get("model", "reduced")) not in MODELS:
-                raise ValueError(f"unknown model {params.get('model')!r}; known: {', '.join(MODELS)}")
-            w = params.get("workers", 1)
-            if isinstance(w, bool) or not isinstance(w, int) or w <= 0:
-                raise ValueError(f"workers must be a positive integer, got {w!r}")
-        settle = params.get("settle_time", 5.0)
-        if isinstance(settle, bool) or not isinstance(settle, (int, float)) or not settle > 0:
-            raise ValueError(f"settle_time must be > 0 s, got {settle!r}")
-    except (ValueError, TypeError) as exc:
+        registry.get(kind).check_params(params)
+    except ValueError as exc:
         raise StudyError(f"{where}: {exc}") from None
 
 

@@ -107,7 +107,7 @@ def test_step_action_adds_to_or_replaces_the_law_wrench(make_hop):
 
 def test_bad_arguments_are_one_line_errors(make_hop):
     from astrobee.scenario import Scenario
-    with pytest.raises(ValueError, match="controller must be pd or mpc"):
+    with pytest.raises(ValueError, match="controller must be mpc or pd"):
         Flight(make_hop(None), controller="lqr").reset()
     with pytest.raises(ValueError, match="one robot, or two"):
         Flight(Scenario.load("node2_to_jem", robots=["", "a", "b"]))

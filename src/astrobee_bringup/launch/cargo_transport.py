@@ -1,7 +1,7 @@
 """The cargo-transport graph: router, simulator, planner, controller and the bag recorder.
 
 Launch arguments (`name:=value`): scenario (config/scenarios/<name>.yaml, default
-node2_to_jem), controller (pd | mpc), record (true | false), bag_dir (default <run>/bag),
+node2_to_jem), controller (a law of astrobee_control.registry: pd | mpc | ...), record (true | false), bag_dir (default <run>/bag),
 clock (realtime | fast | lockstep; default lockstep headless: the sim waits for each
 command, as fast as the graph answers; realtime with gui), lockstep_timeout (wall s the sim
 waits for a tick's command before stepping on; the sim's default when unset), gui (true |
@@ -41,9 +41,9 @@ from astrobee.config import load_yaml
 from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
+from astrobee_control import registry
 
 
-CONTROLLERS = ("pd", "mpc")
 DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
@@ -55,7 +55,8 @@ SAFETY_MODES = {"true": "controller", "yes": "controller", "1": "controller", "o
 # the launch arguments, for `astrobee launch cargo_transport --show-args`: name -> (default, what)
 ARGUMENTS = {
     "scenario": ("node2_to_jem", "config/scenarios/<name>.yaml to fly"),
-    "controller": ("", "pd | mpc for every robot ('': each scenario's `controller:`, else pd)"),
+    "controller": ("", f"{registry.choices_text(' | ')} for every robot ('': each scenario's "
+                       "`controller:`, else pd)"),
     "clock": ("lockstep", "realtime | fast | lockstep (lockstep: the sim waits for each "
                           "command; realtime with gui)"),
     "lockstep_timeout": ("", "wall s the sim waits for a tick's command (the sim's default)"),
@@ -99,8 +100,9 @@ def scenario_overrides(ctx: LaunchContext) -> Overrides:
 def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     scenario = ctx.arg("scenario", "node2_to_jem")
     controller = ctx.arg("controller", "")      # '' : each scenario's own (pd if it names none)
-    if controller and controller not in CONTROLLERS:
-        raise LaunchError(f"controller must be {' or '.join(CONTROLLERS)}, got '{controller}'")
+    known = registry.names()
+    if controller and controller not in known:
+        raise LaunchError(f"controller must be {registry.choices_text()}, got '{controller}'")
     demo = ctx.flag("demo")
     legs = list(DEMO_LEGS) if demo else [scenario]
     if demo:
@@ -126,8 +128,9 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         names = list(built.robot_names)
         robots += [r for r in names if r not in robots]
         kind = controller or str(built.extra.get("controller") or "pd")
-        if kind not in CONTROLLERS:
-            raise LaunchError(f"scenario {leg}: controller must be {' or '.join(CONTROLLERS)}, got '{kind}'")
+        if kind not in known:
+            raise LaunchError(f"scenario {leg}: controller must be {registry.choices_text()}, "
+                              f"got '{kind}'")
         for r in names:
             if kinds.setdefault(r, kind) != kind:
                 raise LaunchError(f"robot {r or '(default)'} flies with {kinds[r]} in one leg and "
@@ -136,10 +139,15 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
             shares.update({r: built.bag.mass / len(names) for r in names})
     ctl_params = {}                     # controller kind -> its parameters file
     for kind in sorted(set(kinds.values())):
-        name = f"{kind}_controller_node"
+        law = registry.get(kind)
+        try:                            # the law's defaults + config/controllers.yaml, checked
+            law.check_params()
+        except ValueError as exc:
+            raise LaunchError(f"controller {kind}: {exc}") from None
+        # the node declares the law's defaults; the file carries the site's overrides
         ctl_params[kind] = write_params_file(
-            ctx.run_dir / "params" / f"{name}.yaml", name,
-            flatten_params(load_yaml(ctx.config_dir / "controllers.yaml").get(kind, {})))
+            ctx.run_dir / "params" / f"{law.node_name}.yaml", law.node_name,
+            flatten_params(load_yaml(ctx.config_dir / "controllers.yaml").get(kind) or {}))
     common = {"scenario": scenario, "use_sim_time": True}
     sim_params = {**common, "clock_mode": clock, "gui": gui}
     if ctx.arg("lockstep_timeout"):
@@ -172,17 +180,22 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         per_robot = {"use_sim_time": True}
         if robot in shares:  # a bag held by several robots: each feeds forward its share
             per_robot["bag_mass"] = shares[robot]
-        if kinds[robot] == "mpc" and "seed" in sim_params:     # its sampling, seeded by the run's
+        law = registry.get(kinds[robot])
+        if "seed" in law.parameters and "seed" in sim_params:  # its sampling: the run's seed
             per_robot["seed"] = sim_params["seed"]
         if safety == "controller":      # the CBF filter inside the controller's process
             per_robot["safety"] = True
-        ctl_name = f"{kinds[robot]}_controller_node"
+        ctl_name = law.node_name        # a law without an executable of its own: controller_node <law>
+        own = bool(law.executable)
         nodes.append(NodeSpec(f"{robot}/{ctl_name}" if robot else ctl_name, "astrobee_control",
-                              ctl_name, parameters=[ctl_params[kinds[robot]], per_robot],
+                              law.executable or registry.GENERIC_EXECUTABLE,
+                              parameters=[ctl_params[kinds[robot]], per_robot],
+                              arguments=[] if own else [law.name],
                               namespace=robot,
                               required=not mission,
-                              ros_args=["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"]
-                              if safety == "node" else []))
+                              ros_args=([] if own else ["-r", f"__node:={ctl_name}"])
+                              + (["-r", "gnc/ctl/command:=gnc/ctl/command_nominal"]
+                                 if safety == "node" else [])))
         if safety == "node":    # the CBF filter in a process of its own between controller and sim
             nodes.append(NodeSpec(f"{robot}/safety_filter_node" if robot else "safety_filter_node",
                                   "astrobee_control", "safety_filter_node", namespace=robot,
