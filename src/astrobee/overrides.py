@@ -5,7 +5,7 @@ arguments (`bag_mass:=12`, strings), ROS parameters of sim_node (typed), study k
 values) or Python keywords (Flight, Simulation, the Gymnasium environments):
 
     OVERRIDE_KEYS = bag_model, bag_variant, bag_resolution, bag_mass, fem_solver,
-                    flight_mode, robots, realism
+                    flight_mode, robots, realism, grasp
 
     ov = parse_overrides({"bag_mass": "12", "robots": "a,b"}, source="launch")
     ov.given()                  # {'bag_mass': 12.0, 'robots': ('a', 'b')}: keywords of Scenario.override
@@ -42,6 +42,16 @@ def bag_variants() -> tuple[str, ...]:
     return tuple(config.bags()["handles"])
 
 
+def grasp_names() -> tuple[str, ...]:
+    """The grasp models of config/bags.yaml (grasp.models; astrobee_sim.grasp implements them)."""
+    return tuple((config.bags().get("grasp") or {}).get("models") or ("strap", "hinge", "clamp"))
+
+
+def default_grasp() -> str:
+    """The grasp a bag gets when none is named (config/bags.yaml grasp.default)."""
+    return str((config.bags().get("grasp") or {}).get("default", "strap"))
+
+
 @dataclass(frozen=True)
 class Overrides:
     """Validated scenario overrides (None: keep the scenario's). realism is a preset name or a
@@ -55,6 +65,7 @@ class Overrides:
     flight_mode: str | None = None
     robots: tuple[str, ...] | None = None
     realism: str | Realism | None = None
+    grasp: str | None = None
 
     def given(self) -> dict[str, Any]:
         """The overrides set, as keywords of Scenario.override."""
@@ -145,6 +156,8 @@ def parse_overrides(values: Mapping[str, Any] | None, source: str = "python") ->
             out[key] = _choice(key, value, bag_variants())
         elif key == "fem_solver":
             out[key] = _choice(key, value, FEM_SOLVERS)
+        elif key == "grasp":
+            out[key] = _choice(key, value, grasp_names())
         elif key == "flight_mode":
             out[key] = _choice(key, value, tuple(flight_modes.names()))
         elif key == "bag_resolution":

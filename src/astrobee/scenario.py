@@ -18,7 +18,7 @@ from . import config, flight_modes
 from .errors import ScenarioError
 from .overrides import (BAG_MODELS, FEM_SOLVERS, MASS_RANGE, MAX_ROBOTS, NO_BAG,  # noqa: F401
                         OVERRIDE_KEYS, RESOLUTION_RANGE, Overrides, bag_variants,
-                        parse_overrides)
+                        default_grasp, grasp_names, parse_overrides)
 from .overrides import NAME as _NAME
 from .realism import Realism
 from .realism import resolve as resolve_realism
@@ -27,16 +27,6 @@ from .realism import resolve as resolve_realism
 def default_fem_solver() -> str:
     """The FEM solver a bag gets when none is named (config/bags.yaml models.fem.solver)."""
     return str(config.bags().get("models", {}).get("fem", {}).get("solver", "fast"))
-
-
-def grasp_names() -> tuple[str, ...]:
-    """The grasp models of config/bags.yaml (grasp.models; astrobee_sim.grasp implements them)."""
-    return tuple((config.bags().get("grasp") or {}).get("models") or ("strap", "hinge", "clamp"))
-
-
-def default_grasp() -> str:
-    """The grasp a bag gets when none is named (config/bags.yaml grasp.default)."""
-    return str((config.bags().get("grasp") or {}).get("default", "strap"))
 
 
 def _vec(value: Any, n: int, what: str) -> tuple[float, ...]:
@@ -236,6 +226,8 @@ class Scenario:
                 bag = replace(bag, mass=ov.bag_mass)
             if ov.fem_solver:
                 bag = replace(bag, solver=ov.fem_solver)
+            if ov.grasp:
+                bag = replace(bag, grasp=ov.grasp)
             bag.validate()
         sc = replace(sc, bag=bag)
         if ov.robots:

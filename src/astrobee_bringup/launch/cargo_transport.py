@@ -74,6 +74,8 @@ ARGUMENTS = {
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
     "bag_mass": ("", "scenario override: cargo bag mass in kg"),
     "fem_solver": ("", "scenario override: the FEM bag's solver (e.g. fast)"),
+    "grasp": ("", "scenario override: how the gripper holds the bag's handle: strap | hinge | "
+              "clamp (astrobee_sim.grasp)"),
     "flight_mode": ("", "scenario override: a flight mode (e.g. nominal, quiet)"),
     "robots": ("", "scenario override: comma-separated robot names (namespaces)"),
     "realism": ("", "realism preset of config/realism.yaml (off, astrobee, harsh; '' = the "
