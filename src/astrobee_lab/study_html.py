@@ -1,6 +1,7 @@
 """A study report as one self-contained HTML page: the same parts as report.md (study_report's
 Doc), tables as HTML tables, plots inline as base64 PNG data URIs (no file beside it needed; a
-browser opens it offline), a little CSS for legible tables."""
+browser opens it offline), a little CSS for legible tables, and one inline line of script that reports on the console any
+plot the browser could not decode (what a headless check of the page looks for)."""
 from __future__ import annotations
 
 import base64
@@ -17,6 +18,11 @@ figure { display: inline-block; margin: 0.5em 1em 1em 0; }
 figcaption { font-size: 0.85em; color: #555; }
 img { max-width: 100%; }
 """
+# console.error for an image that did not decode: a headless browser check greps for it
+CHECK = ("window.addEventListener('load', () => { for (const i of document.images) "
+         "{ if (!i.complete || i.naturalWidth === 0) console.error('REPORT ERROR: plot not decoded: ' + i.alt); } "
+         "console.log('report loaded: ' + document.images.length + ' plots, ' + "
+         "document.querySelectorAll('table').length + ' tables'); });")
 
 
 def _image(path: Any) -> str:
@@ -47,5 +53,5 @@ def to_html(doc: Any, title: str) -> str:
                        f"<figcaption>{e(caption)}</figcaption></figure>")
         elif kind == "ul":
             out.append("<ul>" + "".join(f"<li>{e(i)}</li>" for i in x) + "</ul>")
-    out += ["</body>", "</html>", ""]
+    out += [f"<script>{CHECK}</script>", "</body>", "</html>", ""]
     return "\n".join(out)
