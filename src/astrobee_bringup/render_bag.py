@@ -8,10 +8,9 @@ candidates and the flown trail. The overlay gives the time, the robot's speed, t
 about the handle, its clearance to the walls, and contacts when they happen (the line turns red
 and a red spot flashes at each contact point).
 
-Swing angle: the angle between the direction from the handle to the bag's centre now and at the
-leg's first bag sample (at rest), both in the body frame of the robot holding handle 0; the
-handle point is carried rigidly in that robot's body frame from the first sample (the arm holds
-it). 0 deg: the bag hangs as at the start; it grows as the bag swings about the gripper.
+Swing angle (render_tracks.swing_angle): the angle between the direction from the handle to the
+bag's centre now and at the leg's first bag sample (at rest), both in the body frame of the robot
+holding handle 0; 0 deg: the bag hangs as at the start.
 
 `render_demo_legs(run_dir)` writes one video per leg of a demo run (summary.json's wall-clock
 windows). Reading the recording: render_tracks; drawing: astrobee_sim.render.
@@ -31,8 +30,9 @@ import numpy as np
 
 from astrobee import rotations as rot
 from astrobee_bringup.render_tracks import (MAX_COORD, MAX_RESETS, Recording,  # noqa: F401
-                                            RenderError, Track, _Timeline, _usable,
-                                            read_recording, surface_faces)
+                                            RenderError, Track, _contacts_at, _Timeline,
+                                            _usable, read_recording, surface_faces,
+                                            swing_angle)
 
 DEFAULT_FPS = 10
 DEFAULT_SPEED = 4.0                    # sim seconds per video second
@@ -40,42 +40,6 @@ MAX_FRAMES = 3000                      # a longer video is refused (5 min at 10 
 PATH_RGB, TRAIL_RGB, CAND_RGB = (40, 210, 70), (80, 160, 255), (235, 80, 200)
 CONTACT_RGB = (255, 30, 30)
 FLASH = 0.3                            # sim s a contact's spot stays on (at least a frame's)
-
-
-# ---- overlay figures ---------------------------------------------------------------------
-def swing_angle(rec: Recording, t: float) -> float | None:
-    """The bag's swing about the handle at t (rad; see the module docstring), None without a
-    bag state or robot."""
-    if rec.bag is None or not rec.robots:
-        return None
-    name = rec.robot_order[0] if rec.robot_order else next(iter(rec.robots))
-    robot = rec.robots[name]
-    t_rest = float(rec.bag.t[0])
-    p0, q0 = robot.at(t_rest)
-    c0, qb0 = rec.bag.at(t_rest)
-    handle = (c0 + rot.rotate(qb0, rec.bag_handles[0]) if rec.bag_handles else p0)
-    grip = rot.rotate(rot.conjugate(q0), handle - p0)             # in the robot's body frame
-    rest = rot.rotate(rot.conjugate(q0), c0 - p0) - grip
-    p, q = robot.at(t)
-    c, _ = rec.bag.at(t)
-    now = rot.rotate(rot.conjugate(q), c - p) - grip
-    n0, n1 = float(np.linalg.norm(rest)), float(np.linalg.norm(now))
-    if n0 < 1e-6 or n1 < 1e-6:
-        return None
-    return float(math.acos(max(-1.0, min(1.0, float(rest @ now) / (n0 * n1)))))
-
-
-def _contacts_at(rec: Recording, t: float, flash: float) -> tuple[int, float, float, list]:
-    """(index of the contact sample at t or -1, robot and bag clearance there (m, nan
-    unknown), contact points of the samples in (t - flash, t])."""
-    if not len(rec.contact_t):
-        return -1, math.nan, math.nan, []
-    k = int(np.searchsorted(rec.contact_t, t, side="right")) - 1
-    if k < 0:
-        return -1, math.nan, math.nan, []
-    lo = int(np.searchsorted(rec.contact_t, t - flash, side="right"))
-    pts = [p for i in range(lo, k + 1) for p in rec.contact_points[i]]
-    return k, float(rec.robot_clearance[k]), float(rec.bag_clearance[k]), pts
 
 
 def _fmt_m(v: float) -> str:

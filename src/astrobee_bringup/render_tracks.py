@@ -410,3 +410,42 @@ def _read_contacts(rec: Recording, raw: list[tuple[int, Any]], line: "_Timeline"
     rec.bag_clearance = np.array([neg(m.bag_clearance) for _, m in rows])
     rec.contact_points = [np.array([_xyz(c.position) for c in m.contacts], float).reshape(-1, 3)
                           for _, m in rows]
+
+
+# ---- overlay figures ---------------------------------------------------------------------
+def swing_angle(rec: Recording, t: float) -> float | None:
+    """The bag's swing about the handle at t (rad), None without a bag state or robot: the
+    angle between the direction from the handle to the bag's centre now and at the leg's first
+    bag sample (at rest), both in the body frame of the robot holding handle 0. The handle point
+    is carried rigidly in that robot's body frame from the first sample (the arm holds it); a
+    bag whose handles are unknown swings about the robot's centre instead."""
+    if rec.bag is None or not rec.robots:
+        return None
+    name = rec.robot_order[0] if rec.robot_order else next(iter(rec.robots))
+    robot = rec.robots[name]
+    t_rest = float(rec.bag.t[0])
+    p0, q0 = robot.at(t_rest)
+    c0, qb0 = rec.bag.at(t_rest)
+    handle = (c0 + rot.rotate(qb0, rec.bag_handles[0]) if rec.bag_handles else p0)
+    grip = rot.rotate(rot.conjugate(q0), handle - p0)             # in the robot's body frame
+    rest = rot.rotate(rot.conjugate(q0), c0 - p0) - grip
+    p, q = robot.at(t)
+    c, _ = rec.bag.at(t)
+    now = rot.rotate(rot.conjugate(q), c - p) - grip
+    n0, n1 = float(np.linalg.norm(rest)), float(np.linalg.norm(now))
+    if n0 < 1e-6 or n1 < 1e-6:
+        return None
+    return float(math.acos(max(-1.0, min(1.0, float(rest @ now) / (n0 * n1)))))
+
+
+def _contacts_at(rec: Recording, t: float, flash: float) -> tuple[int, float, float, list]:
+    """(index of the contact sample at t or -1, robot and bag clearance there (m, nan
+    unknown), contact points of the samples in (t - flash, t])."""
+    if not len(rec.contact_t):
+        return -1, math.nan, math.nan, []
+    k = int(np.searchsorted(rec.contact_t, t, side="right")) - 1
+    if k < 0:
+        return -1, math.nan, math.nan, []
+    lo = int(np.searchsorted(rec.contact_t, t - flash, side="right"))
+    pts = [p for i in range(lo, k + 1) for p in rec.contact_points[i]]
+    return k, float(rec.robot_clearance[k]), float(rec.bag_clearance[k]), pts
