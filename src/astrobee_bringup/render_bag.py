@@ -381,7 +381,7 @@ def main(argv: list[str]) -> int:
     p.add_argument("--speed", type=float, default=DEFAULT_SPEED,
                    help=f"sim seconds per video second (default {DEFAULT_SPEED:g})")
     p.add_argument("--scale", type=float, default=1.0, help="frame size factor (1 = 896x384; "
-                   "896x640 with --compare)")
+                   "912x640 with --compare)")
     p.add_argument("--start", type=float, default=0.0, help="sim seconds to skip")
     p.add_argument("--duration", type=float, help="sim seconds to render (default: all)")
     p.add_argument("--leg", type=int, help="render only leg N (0-based) of the run whose "
