@@ -6,7 +6,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Optional, Sequence
 
-import yaml
+from . import yamltext
 
 
 class RosArgsError(ValueError):
@@ -31,8 +31,10 @@ class RosArgs:
 def parse_value(text: str) -> Any:
     """Parse a `-p name:=value` value the way rcl does (as a YAML scalar or list)."""
     try:
-        return yaml.safe_load(text) if text != "" else ""
-    except yaml.YAMLError:
+        return yamltext.load(text) if text != "" else ""
+    except yamltext.YamlTooDeep as exc:
+        raise RosArgsError(f"parameter value: {exc}") from None
+    except yamltext.YamlError:
         return text
 
 
@@ -132,11 +134,11 @@ def load_params_file(path: str, node_name: str, namespace: str) -> dict:
     """Parameters for one node from a ROS 2 YAML file (`node: ros__parameters: {...}`, `/**` etc)."""
     try:
         with open(path) as f:
-            doc = yaml.safe_load(f) or {}
+            doc = yamltext.load(f, f"parameter file {path}") or {}
     except OSError as e:
         raise RosArgsError(f"cannot read parameter file {path}: {e}") from e
-    except yaml.YAMLError as e:
-        raise RosArgsError(f"parameter file {path} is not valid YAML: {e}") from e
+    except yamltext.YamlError as e:
+        raise RosArgsError(str(e)) from None
     if not isinstance(doc, dict):
         raise RosArgsError(f"parameter file {path}: top level must be a mapping of node names")
     ns = namespace.rstrip("/")

@@ -12,8 +12,12 @@ from typing import Sequence
 
 from roszen.cli import registry
 from roszen.cli.common import CliError, Parser, line_buffered
+from roszen.names import InvalidNameError
+from roszen.yamltext import YamlError
 
 GROUPS = ("roszen.verbs",)
+# what a user typed wrong: one line `<prog> <verb>: <reason>`, exit 1, no traceback
+USER_ERRORS = (CliError, InvalidNameError, YamlError)
 
 # the verbs with their own parsers (pyproject.toml's entry points name these objects)
 RUN = registry.Verb("start one node (like `ros2 run`): run PACKAGE EXECUTABLE [--ros-args ...]",
@@ -47,7 +51,7 @@ def main(argv: list[str] | None = None, prog: str = "roszen", groups: Sequence[s
         verb, rest, words = own
         try:
             return verb.run(rest, prog)
-        except CliError as exc:
+        except USER_ERRORS as exc:
             print(f"{prog} {words}: {exc}", file=sys.stderr)
             return 1
         except (KeyboardInterrupt, BrokenPipeError):
@@ -59,7 +63,7 @@ def main(argv: list[str] | None = None, prog: str = "roszen", groups: Sequence[s
             return 2
         args = parser.parse_args(argv)
         return int(args.func(args) or 0)
-    except CliError as exc:
+    except USER_ERRORS as exc:
         verb = " ".join(a for a in argv[:2] if not a.startswith("-"))
         print(f"{prog} {verb}: {exc}" if verb else f"{prog}: {exc}", file=sys.stderr)
         return 1

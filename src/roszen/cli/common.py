@@ -180,21 +180,27 @@ def prime_graph(node, quiet: float = 0.1, limit: float = 1.0) -> None:
 
 
 def fq_name(name: str) -> str:
-    """Topic/service names on the command line are taken as absolute ('/x' for 'x')."""
+    """Topic/service names on the command line are taken as absolute ('/x' for 'x'); CliError
+    for a name the ROS 2 rules refuse (checked before joining the graph)."""
+    from roszen.names import InvalidNameError, expand_name
     name = name.strip()
     if not name:
         raise CliError("empty name")
-    return name if name.startswith("/") else "/" + name
+    name = name if name.startswith("/") else "/" + name
+    try:
+        expand_name(name, "cli", "/")
+    except InvalidNameError as exc:
+        raise CliError(str(exc)) from None
+    return name
 
 
 def parse_yaml_values(text: str | None, type_name: str, factory):
     """Build a message from the YAML of the command line; CliError naming the bad part."""
-    import yaml
+    from roszen import yamltext
     try:
-        data = yaml.safe_load(text) if text and text.strip() else {}
-    except yaml.YAMLError as exc:
-        first = str(exc).replace("\n", " ")
-        raise CliError(f"the passed value is not valid YAML: {first}") from None
+        data = yamltext.load(text, "the passed value") if text and text.strip() else {}
+    except yamltext.YamlError as exc:
+        raise CliError(str(exc)) from None
     if data is None:
         data = {}
     if not isinstance(data, dict):

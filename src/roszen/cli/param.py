@@ -139,10 +139,12 @@ def get_cmd(args) -> int:
 
 def parse_value(text: str) -> Any:
     """The command line's value as `ros2 param set` reads it (YAML: 1 int, 1.0 double, true)."""
-    import yaml
+    from roszen import yamltext
     try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
+        value = yamltext.load(text)
+    except yamltext.YamlTooDeep as exc:
+        raise CliError(str(exc)) from None
+    except yamltext.YamlError:
         return text
     if value is None:
         return text

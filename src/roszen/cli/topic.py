@@ -428,7 +428,12 @@ def pub_cmd(args) -> int:
     if wait_subs is None:
         wait_subs = 1 if times else 0
     if args.node_name:
+        from roszen.names import InvalidNameError, validate_node_name
         from roszen.node import Node
+        try:
+            validate_node_name(args.node_name)     # before joining the graph
+        except InvalidNameError as exc:
+            raise CliError(str(exc)) from None
         node = Node(args.node_name, start_parameter_services=False, enable_rosout=False)
         node.context.graph.wait_ready(3.0)
     else:
