@@ -16,7 +16,7 @@ active/fallback state changes and at most `diagnostics_rate` Hz otherwise.
 The filtering itself (carried bag, counters, diagnostics' content) is safety.LawFilter, which a
 controller_node with `safety:=true` runs in its own process (no extra hop; the launch's default
 way): this node is for a controller that is not ours (`astrobee launch cargo_transport
-safety:=node`). Both publish the same diagnostics through SafetyDiagnostics (below).
+safety:=node`). Both publish the same diagnostics through node_io.SafetyDiagnostics.
 
 Callbacks never raise: a bad or non-finite sample is logged and dropped.
 """
@@ -31,12 +31,11 @@ from astrobee import msgconv as mc
 from roszen import node_main
 from roszen.parameters import read_only, runtime
 
-from .controller_node import CarriedBag, bag_descriptors, ekf_state
+from .node_io import SAFETY, CarriedBag, SafetyDiagnostics, bag_descriptors, ekf_state  # noqa: F401
 from .pd import State
-from .safety.law_filter import DEFAULT_MARGIN, LawFilter, SafetyResult
+from .safety.law_filter import DEFAULT_MARGIN, LawFilter
 
 COMMAND_NOMINAL = "gnc/ctl/command_nominal"   # the controller's command, before the filter
-SAFETY = "gnc/ctl/safety"                     # latched diagnostics (DiagnosticArray)
 STATE_MAX_AGE = 0.5                           # s of sim time: an older state is not used
 
 PARAMETERS: dict[str, Any] = {
@@ -46,48 +45,6 @@ PARAMETERS: dict[str, Any] = {
     "bag_size": [0.0, 0.0, 0.0],    # m; zeros = the scenario's
     "diagnostics_rate": 2.0,        # Hz at most for unchanged diagnostics
 }
-
-
-class SafetyDiagnostics:
-    """The latched <ns>/gnc/ctl/safety publisher of a node that filters through a LawFilter
-    (this node, or a controller_node with safety:=true): one DiagnosticStatus named
-    "safety_filter", the node's namespace as hardware_id, the LawFilter's level, message and
-    values; on a state change and at the LawFilter's pace, with one log line per change."""
-
-    def __init__(self, node: Any, law_filter: LawFilter) -> None:
-        import roszen
-        from roszen import LATCHED
-
-        M = roszen.message_class
-        self.DiagnosticArray = M("diagnostic_msgs/msg/DiagnosticArray")
-        self.DiagnosticStatus = M("diagnostic_msgs/msg/DiagnosticStatus")
-        self.KeyValue = M("diagnostic_msgs/msg/KeyValue")
-        self.node, self.log, self.lf = node, node.get_logger(), law_filter
-        self.pub = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", SAFETY, LATCHED)
-
-    def publish(self, res: SafetyResult, stamp: Any, t: float) -> None:
-        """Publish the diagnostics of `res` (stamped `stamp`, sim time t) when they are due."""
-        if not self.lf.diagnostics_due(res, t):
-            return
-        line = self.lf.transition(res)
-        if line:
-            self.log.info(line)
-        level, message, pairs = self.lf.status(res)
-        st = self.DiagnosticStatus()
-        st.level = level
-        st.name = "safety_filter"
-        st.hardware_id = self.node.get_namespace() if hasattr(self.node, "get_namespace") else ""
-        st.message = message
-        kvs = []
-        for k, v in pairs:
-            kv = self.KeyValue()
-            kv.key, kv.value = k, v
-            kvs.append(kv)
-        st.values = kvs
-        arr = self.DiagnosticArray()
-        arr.header.stamp = stamp
-        arr.status = [st]
-        self.pub.publish(arr)
 
 
 class SafetyFilterNode:

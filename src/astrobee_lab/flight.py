@@ -108,7 +108,8 @@ class Flight:
                  fem_solver: str | None = None, flight_mode: str | None = None,
                  realism: Any = None, controller_params: dict | None = None,
                  state_source: str = "ekf", task: dict | None = None,
-                 physics_rate: float | None = None, plan: bool = True) -> None:
+                 physics_rate: float | None = None, plan: bool = True,
+                 backend: Any = None) -> None:
         """scenario: a name of config/scenarios (with the overrides, as the launch applies
         them) or a Scenario as is. controller: a registered law's name ('pd', 'mpc', ...) | a ControlLaw | a factory.
         safety: the CBF filter between the law and the sim. realism: a preset name of
@@ -117,7 +118,11 @@ class Flight:
         task: keywords of Task.from_scenario (settle_budget, time_limit, end_on_contact,
         weights, goals...).
         plan: False flies no segment (the law holds the start pose; environments in wrench
-        mode use the reference only for the observation)."""
+        mode use the reference only for the observation).
+        backend: the simulator: None, the pybullet Simulation (astrobee_sim); a SimBackend
+        object (reset to this flight's scenario and seed), or a factory (scenario, seed) -> one.
+        A backend without ekf_state() gives the law the truth; without told_bag_mass(), the
+        scenario's realism bag_mass_told is applied to the bag's mass."""
         overrides = parse_overrides({"bag_model": bag_model, "bag_variant": bag_variant,
                                      "bag_resolution": bag_resolution, "bag_mass": bag_mass,
                                      "fem_solver": fem_solver, "flight_mode": flight_mode,
@@ -143,6 +148,7 @@ class Flight:
         self.state_source = state_source
         self.task_kw = dict(task or {})
         self.physics_rate = physics_rate
+        self.backend = backend
         self.plan_enabled = bool(plan)
         self.mode = flight_modes.get(self.scenario.flight_mode)
         self.sim: Any = None
@@ -154,10 +160,15 @@ class Flight:
 
     # ---- setup ----------------------------------------------------------------------------
     def _make_sim(self, seed: int) -> None:
-        from astrobee_sim.simulation import Simulation
-        if self.sim is None:
+        if self.sim is not None:
+            self.sim.reset(self.scenario, seed)
+        elif self.backend is None:
+            from astrobee_sim.simulation import Simulation
             self.sim = Simulation(self.scenario, seed=seed, physics_rate=self.physics_rate)
+        elif callable(self.backend) and not hasattr(self.backend, "step"):
+            self.sim = self.backend(self.scenario, seed)
         else:
+            self.sim = self.backend
             self.sim.reset(self.scenario, seed)
         self.dt = self.sim.dt
 
@@ -224,7 +235,8 @@ class Flight:
         sc = self.scenario
         if sc.bag is None:
             return None
-        told = float(self.sim.told_bag_mass())
+        told_fn = getattr(self.sim, "told_bag_mass", None)
+        told = float(told_fn()) if told_fn is not None else sc.realism.told_mass(sc.bag.mass)
         mass = told if told > 0 else float(sc.bag.mass)
         n = len(self.names)
         return mass / n if n > 1 and sc.bag.handles == n else mass
@@ -275,7 +287,7 @@ class Flight:
         from astrobee_control.pd import State
         sim = self.sim
         self._truth = {n: sim.robot_state(n) for n in self.names}
-        ekf = sim.ekf_state if self.state_source == "ekf" else None
+        ekf = getattr(sim, "ekf_state", None) if self.state_source == "ekf" else None
         self._state = {}
         for n in self.names:
             # (position, orientation, velocity, omega) world frame -> State with BODY omega,

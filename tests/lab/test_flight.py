@@ -132,3 +132,24 @@ def test_two_robots_fly_the_formation_plan_to_their_goals():
     assert res.metrics["final_position_error_bumble"] <= 0.2
     assert res.metrics["final_position_error_robot"] <= 0.2
     assert res.row()["robots"] == 2 and res.metrics["contacts"] == 0
+
+
+def test_the_simulator_backend_can_be_passed_in(make_hop):
+    """Flight(backend=...): the rigid-body backend (no EKF model: the law sees the truth) flies
+    the same hop to its goal; a factory and an object are both accepted, and the flight
+    drives the one it was given."""
+    from astrobee_sim.rigid_backend import RigidSim
+    built = []
+
+    def factory(scenario, seed):
+        built.append(RigidSim(scenario, seed=seed))
+        return built[-1]
+
+    with Flight(make_hop(None), backend=factory) as f:
+        res = f.run()
+        assert f.sim is built[0]
+    assert res.success, res.cause
+    sim = RigidSim("node2_to_jem")
+    with Flight(make_hop(None), backend=sim) as f:
+        f.reset()
+        assert f.sim is sim and sim.scenario.name == f.scenario.name
