@@ -362,6 +362,35 @@ def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | No
     return written
 
 
+def render_demo_compare(run_dir: str | os.PathLike, scenarios: tuple[str, str],
+                        bag_dir: str | os.PathLike | None = None, name: str = "video_compare.mp4",
+                        **options: Any) -> Path | None:
+    """The two legs of a run flown in `scenarios` side by side (render_compare) into
+    run_dir/name, noted in summary.json as `comparison` ({video, legs} or {error, legs}); None
+    when the run has not both legs or they cannot be rendered."""
+    from astrobee_bringup.summary import write_json
+    run_dir = Path(run_dir)
+    bag_dir = Path(bag_dir) if bag_dir else run_dir / "bag"
+    path = run_dir / "summary.json"
+    data = json.loads(path.read_text())
+    legs = {leg.get("scenario"): leg for leg in data.get("legs", [])}
+    if not all(s in legs and legs[s].get("wall_t0") is not None
+               and legs[s].get("wall_t1") is not None for s in scenarios):
+        return None
+    sources = [Source(bag_dir, (float(legs[s]["wall_t0"]), float(legs[s]["wall_t1"])), s)
+               for s in scenarios]
+    note: dict[str, Any] = {"legs": list(scenarios)}
+    out = None
+    try:
+        render_compare(sources, run_dir / name, **options)
+        note["video"], out = name, run_dir / name
+    except (RenderError, ValueError, ArithmeticError) as exc:
+        note["error"] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    data["comparison"] = note
+    write_json(path, data)
+    return out
+
+
 # ---- the command -----------------------------------------------------------------------------
 def main(argv: list[str]) -> int:
     """`astrobee bag render RECORDING -o flight.mp4 [--gif] ...` or `astrobee bag render

@@ -195,3 +195,10 @@ def test_compare_two_legs_of_one_run_side_by_side(tmp_path):
     for f in frames:
         assert bag_pixels(f[:, :half]) > 10 and bag_pixels(f[:, half:]) > 10
     assert render_bag.main(["--compare", str(bag_dir), "-o", str(out)]) == 1
+    # the demo's comparison: two legs by scenario, noted in summary.json
+    run = tmp_path / "run"
+    made = render_bag.render_demo_compare(run, ("pd", "mpc"), fps=1, speed=2, scale=0.25)
+    assert made == run / "video_compare.mp4" and made.stat().st_size > 0
+    note = json.loads((run / "summary.json").read_text())["comparison"]
+    assert note == {"legs": ["pd", "mpc"], "video": "video_compare.mp4"}
+    assert render_bag.render_demo_compare(run, ("pd", "lqr")) is None

@@ -45,6 +45,8 @@ from astrobee_control import registry
 
 
 DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
+# the same carry by two controllers, side by side in video_compare.mp4 (render_demo_compare)
+DEMO_COMPARE = ("node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
 SAFETY_DEFAULT = "true"
@@ -230,6 +232,11 @@ def post_run(ctx: LaunchContext, status: int) -> None:
             from astrobee_bringup.render_bag import render_demo_legs
             for path in render_demo_legs(ctx.run_dir, bag_dir):
                 print(f"[video] {path}", flush=True)
+            if ctx.flag("demo"):                    # at 8x: half the frames of a leg's
+                from astrobee_bringup.render_bag import render_demo_compare
+                out = render_demo_compare(ctx.run_dir, DEMO_COMPARE, bag_dir, speed=8.0)
+                if out is not None:
+                    print(f"[video] {out} ({' vs '.join(DEMO_COMPARE)})", flush=True)
             _print_video_errors(ctx.run_dir / "summary.json")
 
 
