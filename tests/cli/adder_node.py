@@ -6,7 +6,7 @@ import sys
 
 
 def main() -> int:
-    from roszen import LATCHED, Node, message_class
+    from roszen import LATCHED, Node, ParameterDescriptor, message_class
     node = Node("adder", argv=sys.argv)
     calls = [0]
 
@@ -28,7 +28,8 @@ def main() -> int:
     mode.publish(String(data="adding"))
     node.declare_parameter("increment", 1)
     node.declare_parameter("label", "adder")
-    node.declare_parameter("gain", 0.5)
+    node.declare_parameter("gain", 0.5, ParameterDescriptor(description="a scale", min_value=0.0,
+                                                            max_value=10.0))
     node.declare_parameter("weights", [1.0, 2.0])
     n = [0]
 

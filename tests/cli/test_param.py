@@ -87,5 +87,16 @@ def test_bad_input_one_line_errors(graph):
     assert_one_line_error(run(graph, "set", "/adder", "nope", "1"), "failed", "nope")
     assert_one_line_error(run(graph, "set", "/adder", "increment", "abc"), "failed", "integer")
     assert_one_line_error(run(graph, "set", "/adder", "gain", "{a: 1}"), "not a parameter value")
+    assert_one_line_error(run(graph, "set", "/adder", "gain", "11.0"), "failed", "<= 10")
+    assert_one_line_error(run(graph, "describe", "/adder", "nope"), "Parameter not set", "nope")
     # a rejected set changed nothing
     assert run(graph, "get", "/adder", "increment").stdout == before
+
+
+def test_describe_shows_type_range_and_constraints(graph):
+    r = run(graph, "describe", "/adder", "gain", "label")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == [
+        "Parameter name: gain", "  Type: double", "  Description: a scale", "  Constraints:",
+        "    Min value: 0", "    Max value: 10",
+        "Parameter name: label", "  Type: string", "  Constraints:"]

@@ -1,4 +1,4 @@
-"""`param list | get | set | dump`, shaped like `ros2 param`, over the nodes' parameter services."""
+"""`param list | get | set | describe | dump`, shaped like `ros2 param`, over the nodes' parameter services."""
 from __future__ import annotations
 
 from typing import Any
@@ -29,10 +29,15 @@ def add_parser(sub) -> None:
     st.add_argument("parameter_name")
     st.add_argument("value")
     st.set_defaults(func=set_cmd)
+    desc = v.add_parser("describe", help="print parameters' descriptors: type, read-only, "
+                        "range and constraints")
+    desc.add_argument("node_name")
+    desc.add_argument("parameter_names", nargs="+")
+    desc.set_defaults(func=describe_cmd)
     dump = v.add_parser("dump", help="print a node's parameters as a ROS 2 params file (YAML)")
     dump.add_argument("node_name")
     dump.set_defaults(func=dump_cmd)
-    for q in (ls, get, st, dump):
+    for q in (ls, get, st, desc, dump):
         q.add_argument("--timeout", type=positive_float, default=5.0,
                        help="seconds to wait for the node's parameter services (default 5)")
 
@@ -134,6 +139,32 @@ def get_cmd(args) -> int:
         print(f"{TYPE_WORDS.get(ptype, '')} values are: {value}")
     else:
         print(f"{TYPE_WORDS.get(ptype, '')} value is: {value}")
+    return 0
+
+
+def describe_cmd(args) -> int:
+    """As `ros2 param describe`: each parameter's type and constraints."""
+    target = _fqn(args.node_name)
+    s = _Session(args.timeout)
+    try:
+        descs = s.call(s.client(target).describe, list(args.parameter_names))
+    finally:
+        s.close()
+    for d in descs:
+        t = int(d.type)
+        if not t:
+            raise CliError(f"Parameter not set: '{d.name}' on node '{target}'")
+        print(f"Parameter name: {d.name}")
+        print(f"  Type: {TYPE_WORDS.get(t, '').lower()}" + (" array" if t >= 5 else ""))
+        if d.description:
+            print(f"  Description: {d.description}")
+        print("  Constraints:")
+        if d.read_only:
+            print("    Read only: true")
+        for rng in list(d.floating_point_range) + list(d.integer_range):
+            print(f"    Min value: {rng.from_value:g}\n    Max value: {rng.to_value:g}")
+        if d.additional_constraints:
+            print(f"    Additional constraints: {d.additional_constraints}")
     return 0
 
 
