@@ -22,6 +22,7 @@ import numpy as np
 
 from astrobee import config
 from astrobee.flight_modes import FlightMode
+from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.scenario import Scenario, ScenarioError
 
 from .bags.base import BagState
@@ -69,16 +70,26 @@ def check_seed(seed: Any) -> int:
     return s
 
 
+def standing_overrides(overrides: Overrides | None, keys: dict[str, Any]) -> Overrides:
+    """The overrides a backend keeps for every reset by name: an Overrides, or its keys as
+    keywords (astrobee.overrides.OVERRIDE_KEYS) parsed by the one parser (ScenarioError for a
+    bad value); TypeError for any other keyword."""
+    unknown = sorted(set(keys) - set(OVERRIDE_KEYS))
+    if unknown or (overrides is not None and keys):
+        raise TypeError(f"a backend takes an Overrides or the keywords {OVERRIDE_KEYS}, got "
+                        f"{unknown or sorted(keys)}")
+    return overrides if overrides is not None else parse_overrides(keys, source="python")
+
+
 def resolve_scenario(scenario: str | dict | Scenario | None, current: Scenario | None,
-                     overrides: dict[str, Any]) -> Scenario:
+                     overrides: Overrides) -> Scenario:
     """The Scenario a reset asks for: a Scenario as given; a name (config/scenarios) or a
     scenario mapping, with the backend's standing overrides; None/'' the current one. Raises
     ScenarioError (and the caller changes nothing)."""
     if isinstance(scenario, Scenario):
         return scenario
-    given = {k: v for k, v in overrides.items() if v is not None}
     if isinstance(scenario, dict):
-        return Scenario.from_dict(scenario, str(scenario.get("name", "custom"))).override(**given)
+        return Scenario.from_dict(scenario, str(scenario.get("name", "custom"))).override(overrides)
     if scenario is None or scenario == "":
         if current is None:
             scenario = "node2_to_jem"
@@ -86,7 +97,7 @@ def resolve_scenario(scenario: str | dict | Scenario | None, current: Scenario |
             return current
     if not isinstance(scenario, str):
         raise ScenarioError(f"scenario must be a name or a Scenario, got {type(scenario).__name__}")
-    return Scenario.load(scenario, **given)
+    return Scenario.load(scenario, overrides)
 
 
 @runtime_checkable

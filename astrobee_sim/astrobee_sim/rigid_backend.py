@@ -22,9 +22,11 @@ import numpy as np
 from astrobee import config, flight_modes
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
+from astrobee.overrides import Overrides
 from astrobee.scenario import BagSpec, Scenario
 
-from .backend import BagInfo, Contact, check_seed, resolve_scenario, sim_defaults
+from .backend import (BagInfo, Contact, check_seed, resolve_scenario, sim_defaults,
+                      standing_overrides)
 from .bags.base import BagState, align
 from .robot import DISTAL_LEN, GRIPPER_LEN, MAX_ABS_WRENCH, PROXIMAL_LEN
 from .world import station
@@ -136,16 +138,12 @@ class RigidSim:
     """The rigid-body SimBackend (see the module docstring); keywords as Simulation's."""
 
     def __init__(self, scenario: str | Scenario = "node2_to_jem", seed: int = 0,
-                 physics_rate: float | None = None, bag_model: str | None = None,
-                 bag_variant: str | None = None, bag_resolution: int | None = None,
-                 robots: list[str] | None = None, flight_mode: str | None = None,
-                 fem_solver: str | None = None, bag_mass: float | None = None,
-                 wall_thickness: float | None = None, gui: bool = False,
-                 drag: bool = False) -> None:
-        """gui and drag are accepted as Simulation's and ignored (no viewer, no air drag)."""
-        self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
-                          "bag_resolution": bag_resolution, "bag_mass": bag_mass, "robots": robots,
-                          "flight_mode": flight_mode, "fem_solver": fem_solver}
+                 physics_rate: float | None = None, wall_thickness: float | None = None,
+                 gui: bool = False, drag: bool = False, overrides: Overrides | None = None,
+                 **keys: Any) -> None:
+        """The overrides as Simulation's (an Overrides or its keywords); gui and drag are
+        accepted and ignored (no viewer, no air drag)."""
+        self.overrides = standing_overrides(overrides, keys)
         sc = resolve_scenario(scenario, None, self.overrides)
         seed = check_seed(seed)
         defaults = sim_defaults()

@@ -1,5 +1,9 @@
-"""sim_node's parameters: each declared read-only and checked at start, so a bad one ends the node
-with one line naming it (ParameterError), and the checked set as one frozen SimOptions.
+"""sim_node's parameters: each declared read-only with its range, choices or validator, so a bad
+one ends the node at start with one line naming it (the node's ParameterException, or
+ParameterError for a check across parameters), and the checked set as one frozen SimOptions.
+
+The scenario override parameters are astrobee.overrides' keys (OVERRIDE_KEYS but realism, which
+sim_node takes apart, below), checked by its one parser.
 
 The realism parameters are `realism` (a preset of config/realism.yaml), `realism.<knob>` for
 every scalar field of astrobee.realism.Realism (REALISM_SCALARS, derived from the dataclass so a
@@ -7,12 +11,11 @@ new knob is a parameter with no edit here) and one disturbance (`realism.disturb
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-from astrobee import flight_modes
 from astrobee import scenario as scn
+from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.realism import Disturbance, Realism
 from astrobee.scenario import Scenario, ScenarioError
 
@@ -34,7 +37,7 @@ class SimOptions:
 
     backend: str
     scenario: str
-    overrides: dict
+    overrides: Overrides               # the scenario overrides given (realism apart, below)
     seed: int
     clock_mode: str
     physics_rate: float
@@ -64,108 +67,87 @@ class SimOptions:
         return r
 
 
-def _ranged(name: str, value: Any, lo: float, hi: float, lo_open: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(f"parameter {name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v > hi or v < lo or (lo_open and v == lo):
-        rng = f"{'>' if lo_open else '>='} {lo:g} and <= {hi:g}"
-        raise ParameterError(f"parameter {name} must be {rng}, got {value!r}")
-    return v
+def _positive(value: Any) -> None:
+    """A validator: > 0 (the range's upper end is the descriptor's)."""
+    if value <= 0:
+        raise ValueError(f"must be > 0, got {value!r}")
 
 
-def _choice(name: str, value: Any, known: tuple[str, ...]) -> str:
-    v = str(value)
-    if v not in known:
-        raise ParameterError(f"parameter {name}: unknown value {v!r}; known: {', '.join(known)}")
-    return v
+def _override_default(key: str) -> Any:
+    """The ROS parameter default ('not given') of an override key, by its Overrides type."""
+    kind = next(f.type for f in fields(Overrides) if f.name == key)
+    kind = kind if isinstance(kind, str) else str(kind)
+    return 0 if kind.startswith("int") else 0.0 if kind.startswith("float") else ""
+
+
+def _override_check(key: str) -> Any:
+    """A validator: the one override parser on this key's value (astrobee.overrides); its
+    message without the key, which the node's refusal names."""
+    def check(value: Any) -> None:
+        try:
+            parse_overrides({key: value}, source="parameters")
+        except ScenarioError as exc:
+            text = str(exc)
+            raise ValueError(text[len(key):].lstrip(": ") if text.startswith(key) else text) from None
+    return check
 
 
 def read_options(node: Any) -> SimOptions:
-    """Declare and check every parameter (ParameterError names the first bad one)."""
+    """Declare every parameter read-only with its range, choices or validator (the node's
+    declare refuses a bad start value with one line naming it), then the cross-checks by hand
+    (ParameterError names the parameter)."""
     from roszen.parameters import read_only
     d = sim_defaults()
 
-    def par(name: str, default: Any) -> Any:   # all read at start: `param set` is refused
-        return node.declare_parameter(name, d.get(name, default), read_only()).value
+    def par(name: str, default: Any, **check: Any) -> Any:   # read at start: `param set` is refused
+        return node.declare_parameter(name, d.get(name, default), read_only(**check)).value
 
-    backend = _choice("backend", par("backend", "pybullet"), BACKENDS)
+    backend = par("backend", "pybullet", choices=BACKENDS)
     scenario = str(par("scenario", "node2_to_jem"))
     try:
         scn.check_name(scenario)
     except ScenarioError as exc:
         raise ParameterError(f"parameter scenario: {exc}") from None
-    bag_model = str(par("bag_model", "") or "")
-    if bag_model:
-        _choice("bag_model", bag_model, scn.BAG_MODELS + ("none",))
-    bag_variant = str(par("bag_variant", "") or "")
-    if bag_variant:
-        _choice("bag_variant", bag_variant, scn.bag_variants())
-    fem_solver = str(par("fem_solver", "") or "")
-    if fem_solver:
-        _choice("fem_solver", fem_solver, scn.FEM_SOLVERS)
-    bag_resolution = par("bag_resolution", 0)             # FEM target nodes; 0: bags.yaml's
-    if bag_resolution:
-        bag_resolution = int(_ranged("bag_resolution", bag_resolution, *scn.RESOLUTION_RANGE))
-    bag_mass = float(par("bag_mass", 0.0) or 0.0)
-    if bag_mass:
-        bag_mass = _ranged("bag_mass", bag_mass, *scn.MASS_RANGE)
-    robots_param = str(par("robots", ""))       # comma list of robot names; "" = the scenario's
-    robots = [r.strip() for r in robots_param.split(",")] if robots_param.strip() else None
-    flight_mode = str(par("flight_mode", "") or "")
-    if flight_mode:
-        _choice("flight_mode", flight_mode, tuple(flight_modes.names()))
-    clock_mode = _choice("clock_mode", par("clock_mode", "realtime"), CLOCK_MODES)
-    physics_rate = _ranged("physics_rate", par("physics_rate", 350.0), 10.0, 10_000.0)
-    publish_rate = _ranged("publish_rate", par("publish_rate", 62.5), 1.0, 1000.0)
+    overrides = parse_overrides({key: par(key, _override_default(key), validator=_override_check(key))
+                                 for key in OVERRIDE_KEYS if key != "realism"}, source="parameters")
+    clock_mode = par("clock_mode", "realtime", choices=CLOCK_MODES)
+    physics_rate = par("physics_rate", 350.0, min_value=10.0, max_value=10_000.0)
+    publish_rate = par("publish_rate", 62.5, min_value=1.0, max_value=1000.0)
     if physics_rate < publish_rate:
         raise ParameterError(f"parameter physics_rate ({physics_rate:g} Hz) must be >= "
                              f"publish_rate ({publish_rate:g} Hz)")
-    mesh_rate = _ranged("mesh_rate", par("mesh_rate", 10.0), 0.01, 1000.0)
-    lockstep_timeout = _ranged("lockstep_timeout", par("lockstep_timeout", 1.0), 0.0, 3600.0, True)
-    lockstep_start_timeout = _ranged("lockstep_start_timeout", par("lockstep_start_timeout", 30.0),
-                                     0.0, 3600.0, True)
+    mesh_rate = par("mesh_rate", 10.0, min_value=0.01, max_value=1000.0)
+    lockstep_timeout = par("lockstep_timeout", 1.0, max_value=3600.0, validator=_positive)
+    lockstep_start_timeout = par("lockstep_start_timeout", 30.0, max_value=3600.0,
+                                 validator=_positive)
     # commands stamped further than this ahead of sim time are dropped (stale, pre-reset)
-    command_max_lead = _ranged("command_max_lead", par("command_max_lead", 0.5), 0.0, 3600.0, True)
-    seed = par("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ParameterError(f"parameter seed must be a non-negative integer, got {seed!r}")
-    max_sim_time = _ranged("max_sim_time", par("max_sim_time", 0.0), 0.0, 1e9)   # 0: no end
+    command_max_lead = par("command_max_lead", 0.5, max_value=3600.0, validator=_positive)
+    seed = par("seed", 0, min_value=0)
+    max_sim_time = par("max_sim_time", 0.0, min_value=0.0, max_value=1e9)   # 0: no end
     gui = bool(par("gui", False))
     drag = bool(par("drag", False))
     realism, realism_overrides, disturbance = _read_realism(par)
-    start_paused = par("start_paused", False)
-    if not isinstance(start_paused, bool):
-        raise ParameterError(f"parameter start_paused must be true or false, got {start_paused!r}")
-    overrides = {"bag_model": bag_model or None, "bag_variant": bag_variant or None,
-                 "bag_resolution": bag_resolution or None, "bag_mass": bag_mass or None,
-                 "fem_solver": fem_solver or None, "robots": robots,
-                 "flight_mode": flight_mode or None}
-    return SimOptions(backend, scenario, overrides, int(seed), clock_mode, physics_rate,
-                      publish_rate, mesh_rate, lockstep_timeout, lockstep_start_timeout,
-                      command_max_lead, max_sim_time, gui, drag, realism, realism_overrides,
-                      disturbance, start_paused=start_paused)
+    start_paused = bool(par("start_paused", False))
+    return SimOptions(backend, scenario, overrides, int(seed), clock_mode, float(physics_rate),
+                      float(publish_rate), float(mesh_rate), float(lockstep_timeout),
+                      float(lockstep_start_timeout), float(command_max_lead), float(max_sim_time),
+                      gui, drag, realism, realism_overrides, disturbance, start_paused=start_paused)
+
+
+def _preset(name: Any) -> None:
+    """A validator: '' or a preset of config/realism.yaml."""
+    if str(name).strip():
+        Realism.preset(str(name).strip())
 
 
 def _read_realism(par: Any) -> tuple[str, tuple, Disturbance | None]:
     """The realism parameters, each checked alone so the error names it."""
-    preset = str(par("realism", "") or "").strip()
-    try:
-        if preset:
-            Realism.preset(preset)
-    except ScenarioError as exc:
-        raise ParameterError(f"parameter realism: {exc}") from None
+    preset = str(par("realism", "", validator=_preset) or "").strip()
     overrides = []
-    for knob in REALISM_SCALARS:
-        value = par(f"realism.{knob}", None)          # None: not given (any type accepted)
-        if value is None:
-            continue
-        try:
-            Realism.from_dict({knob: value})
-        except ScenarioError as exc:
-            raise ParameterError(f"parameter realism.{knob}: {exc}") from None
-        overrides.append((knob, float(value)))
+    for knob in REALISM_SCALARS:      # None: not given (any type accepted, then checked)
+        value = par(f"realism.{knob}", None, validator=lambda v, k=knob: Realism.from_dict({k: v}))
+        if value is not None:
+            overrides.append((knob, float(value)))
     raw = {k: par(f"realism.disturbance_{k}", None) for k in DISTURBANCE_PARAMS}
     if isinstance(raw["force"], (list, tuple)) and len(raw["force"]) == 0:
         raw["force"] = None                             # an empty list: not given

@@ -22,11 +22,13 @@ import numpy as np
 
 from astrobee import config, flight_modes
 from astrobee.flight_modes import FlightMode
+from astrobee.overrides import Overrides
 from astrobee.realism import Realism
 from astrobee.realism import resolve as resolve_realism
 from astrobee.scenario import Scenario, ScenarioError
 
-from .backend import BagInfo, Contact, check_seed, resolve_scenario, sim_defaults
+from .backend import (BagInfo, Contact, check_seed, resolve_scenario, sim_defaults,
+                      standing_overrides)
 from .bags import Bag, BagState, make_bag
 from .realism_effects import RealismEffects, bag_params
 from .robot import Robot
@@ -40,22 +42,19 @@ class Simulation:
 
     def __init__(self, scenario: str | Scenario = "node2_to_jem", seed: int = 0,
                  physics_rate: float | None = None, gui: bool = False, drag: bool = False,
-                 bag_model: str | None = None, bag_variant: str | None = None,
-                 bag_resolution: int | None = None, robots: list[str] | None = None,
-                 flight_mode: str | None = None, wall_thickness: float | None = None,
-                 wall_bodies: int = 16, fem_solver: str | None = None,
-                 bag_mass: float | None = None, realism: str | dict | Realism | None = None,
-                 grasp: str | None = None):
-        """scenario: a name in config/scenarios (loaded with the bag_*/robots/flight_mode/
-        fem_solver overrides, which also apply to later resets by name) or a Scenario as is.
-        realism: a preset name, a mapping of knobs or a Realism replacing the scenario's (also
-        for later resets, a Scenario given whole included); None keeps the scenario's.
+                 wall_thickness: float | None = None, wall_bodies: int = 16,
+                 overrides: Overrides | None = None,
+                 grasp: str | None = None, **keys: Any):
+        """scenario: a name in config/scenarios (loaded with the overrides, which also apply to
+        later resets by name) or a Scenario as is. The overrides: an astrobee.overrides.Overrides
+        or its keys as keywords (bag_model=..., robots=..., realism=...); realism (a preset
+        name, a mapping of knobs or a Realism) replaces the scenario's also for later resets, a
+        Scenario given whole included.
         grasp: the bag's grasp model (astrobee_sim.grasp; strap | hinge | clamp) replacing the
         scenario's, likewise. Raises ScenarioError for a bad scenario, realism or seed before pybullet is started."""
-        self.overrides = {"bag_model": bag_model, "bag_variant": bag_variant,
-                          "bag_resolution": bag_resolution, "bag_mass": bag_mass, "robots": robots,
-                          "flight_mode": flight_mode, "fem_solver": fem_solver,
-                          "realism": None if realism is None else resolve_realism(realism)}
+        self.overrides = standing_overrides(overrides, keys)
+        realism = self.overrides.realism
+        self._realism = None if realism is None else resolve_realism(realism)
         self._grasp = grasp or None
         sc = self._resolve(scenario, None)
         seed = check_seed(seed)
@@ -94,7 +93,7 @@ class Simulation:
     def _resolve(self, scenario: str | Scenario | None, current: Scenario | None) -> Scenario:
         """resolve_scenario, the standing realism override applied to a Scenario given whole."""
         sc = resolve_scenario(scenario, current, self.overrides)
-        forced = self.overrides.get("realism")
+        forced = self._realism
         if forced is not None and sc.realism != forced:
             sc = sc.override(realism=forced)
         if self._grasp and sc.bag is not None and sc.bag.grasp != self._grasp:

@@ -218,13 +218,14 @@ class _Node:
 
 
 def _sim_node(scenario, model, realism):
+    from astrobee.overrides import Overrides
     from astrobee.scenario import Scenario
     from astrobee_sim import sim_node
     from astrobee_sim.backend import make_backend
     sc = Scenario.load(scenario)
     if model:
         sc = sc.override(bag_model=model)
-    opts = sim_node.SimOptions("pybullet", scenario, {}, 0, "fast", 350.0, 62.5, 10.0, 1.0, 30.0,
+    opts = sim_node.SimOptions("pybullet", scenario, Overrides(), 0, "fast", 350.0, 62.5, 10.0, 1.0, 30.0,
                                0.5, 0.0, False, False, realism=realism)
     kw = {}
     r = opts.realism_for(sc)
