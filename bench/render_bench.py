@@ -1,7 +1,8 @@
 """Render benchmark: frames per second of `astrobee bag render`'s renderer at the default frame
 size (chase 512x384 + overview 384x384), robot flying Node 2 -> JEM with the cargo bag (rigid
 box and a 412-node FEM surface), the planned path and the flown trail; the MP4 encode; and the
-rejected alternative (matplotlib mplot3d drawing the same walls) for the record.
+rejected alternative (matplotlib mplot3d drawing the same walls) for the record; a --compare
+frame (two columns of chase view over overview).
 
 Usage: python bench/render_bench.py [RECORDING]   (with a recorded bag: the whole command on
 its first 60 s of flight too, reading the recording included)
@@ -69,6 +70,13 @@ def main() -> int:
         both = timed(lambda k: fr.render(sc[k], heading, ov), N)
         rows += [(f"chase view, {name}", chase, ""), (f"overview, {name}", over, ""),
                  (f"chase + overview, {name}", both, ">= 10 /s")]
+    sc = scenes(True)                      # --compare: two stacked 448x320 columns, FEM bag
+    cols = [FlightRenderer((448, 320), (448, 320), stacked=True) for _ in range(2)]
+    ov2 = overview_camera(np.vstack([START, GOAL]), aspect=448 / 320)
+    compare = timed(lambda k: [c.render(sc[k], heading, ov2) for c in cols], N)
+    for c in cols:
+        c.close()
+    rows.append(("--compare frame (2 x 448x640), FEM bag", compare, "~2x a frame"))
     frames = [fr.render(s, heading, ov) for s in scenes(False)]
     import imageio_ffmpeg
     with tempfile.TemporaryDirectory() as d:
