@@ -88,7 +88,8 @@ class Camera:
 
     def matrices(self, width: int, height: int) -> tuple[list[float], list[float]]:
         """pybullet's (column-major) view and projection matrices."""
-        import pybullet as p
+        from .pybullet_import import pybullet
+        p = pybullet()
         view = p.computeViewMatrix([float(v) for v in self.eye], [float(v) for v in self.target],
                                    [float(v) for v in self.up])
         proj = p.computeProjectionMatrixFOV(self.fov, width / height, self.near, self.far)
@@ -170,7 +171,8 @@ class Renderer:
     slabs: `cutaway`), the robots and the cargo bag; `render` returns an (H, W, 3) uint8 image."""
 
     def __init__(self, world: World | None = None, cutaway: bool = False):
-        import pybullet as p
+        from .pybullet_import import pybullet
+        p = pybullet()
         self.p = p
         self.world = world or World.from_config()
         self.client = p.connect(p.DIRECT)
