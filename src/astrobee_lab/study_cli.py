@@ -2,7 +2,7 @@
 graph.
 
     astrobee study run studies/smoke.yaml [--workers N | --ray auto|local|ADDRESS] [--out DIR]
-    astrobee study report runs/study_smoke
+    astrobee study report runs/study_smoke            # report.md, report.html, plots/
     astrobee study reflow runs/study_smoke ROW        # ROW: index in results.csv or a key prefix
 """
 from __future__ import annotations
@@ -42,7 +42,8 @@ def _report(a: argparse.Namespace) -> int:
     study = load_study(folder / "study.yaml")
     store = StudyStore(folder)
     table = store.write_table(study)
-    print(f"{write_report(study, store.table(study), folder)} ({table})")
+    md = write_report(study, store.table(study), folder)
+    print(f"{md}, {md.with_name('report.html')} ({table})")
     return 0
 
 
@@ -69,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--list", action="store_true", help="list the flights and exit")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     r.set_defaults(func=_run)
-    rp = sub.add_parser("report", help="rewrite results.csv, report.md and plots of a folder")
+    rp = sub.add_parser("report", help="rewrite results.csv, report.md, report.html (one "
+                        "self-contained page) and plots of a folder")
     rp.add_argument("dir")
     rp.set_defaults(func=_report)
     rf = sub.add_parser("reflow", help="re-fly one row through the whole graph and compare")
