@@ -23,7 +23,7 @@ USER_ERRORS = (CliError, InvalidNameError, YamlError)
 RUN = registry.Verb("start one node (like `ros2 run`): run PACKAGE EXECUTABLE [--ros-args ...]",
                     "roszen.cli.run:main")
 ROUTER = registry.Verb("run the Zenoh router (rmw_zenohd equivalent): router [--port P]",
-                       "roszen.cli.routercmd:main")
+                       "roszen.cli.router:main")
 
 
 def build_parser(prog: str, groups: Sequence[str] = GROUPS,
