@@ -66,6 +66,7 @@ def _msg_repr(self) -> str:
 def make_class(spec: MsgSpec, nested: Callable[[str], type]) -> type:
     """Build the class for `spec`; `nested(name)` returns the class of a nested message type."""
     ns: dict[str, object] = {"_D": MISSING, "_np": np}
+    nested_classes: dict[str, type] = {}     # field name -> its message class (types.convert)
     params: list[str] = []
     body: list[str] = []
     for i, f in enumerate(spec.fields):
@@ -77,7 +78,7 @@ def make_class(spec: MsgSpec, nested: Callable[[str], type]) -> type:
                 params.append(f"{a}=_v{i}")
                 body.append(f"    self.{a} = {a}")
                 continue
-            ns[f"_c{i}"] = nested(t.base)
+            ns[f"_c{i}"] = nested_classes[f.name] = nested(t.base)
             params.append(f"{a}=_D")
             body.append(f"    self.{a} = _c{i}() if {a} is _D else {a}")
             continue
@@ -100,7 +101,7 @@ def make_class(spec: MsgSpec, nested: Callable[[str], type]) -> type:
             else:
                 make = "[]"
         else:
-            ns[f"_c{i}"] = nested(t.base)
+            ns[f"_c{i}"] = nested_classes[f.name] = nested(t.base)
             make = f"[_c{i}() for _ in range({t.size})]" if t.kind == "array" else "[]"
         body.append(f"    self.{a} = {make} if {a} is _D else {a}")
     if not spec.fields:
@@ -119,6 +120,7 @@ def make_class(spec: MsgSpec, nested: Callable[[str], type]) -> type:
         "__repr__": _msg_repr,
         "_spec": spec,
         "_field_types": {attr_name(f.name): f.type.text() for f in spec.fields},
+        "_nested_classes": nested_classes,
         "get_fields_and_field_types": classmethod(lambda cls: dict(cls._field_types)),
     }
     if not spec.fields:

@@ -70,7 +70,7 @@ def _scalar(base: str, value: Any, path: str, string_bound: int = 0) -> Any:
     raise ValueError(f"field '{path}': expected integer ({base}), got {_type_word(value)}")
 
 
-def _array(t: FieldType, value: Any, path: str) -> Any:
+def _array(t: FieldType, value: Any, path: str, item_cls: type | None = None) -> Any:
     if isinstance(value, (str, dict)) or not hasattr(value, "__len__"):
         raise ValueError(f"field '{path}': expected a list, got {_type_word(value)}")
     n = len(value)
@@ -96,10 +96,7 @@ def _array(t: FieldType, value: Any, path: str) -> Any:
         return np.array(items, dtype=dtype)
     if t.is_primitive:
         return [_scalar(t.base, v, f"{path}[{i}]", t.string_bound) for i, v in enumerate(value)]
-    from ..typestore import message_class
-
-    cls = message_class(t.base)
-    return [_nested(cls, v, f"{path}[{i}]") for i, v in enumerate(value)]
+    return [_nested(item_cls, v, f"{path}[{i}]") for i, v in enumerate(value)]
 
 
 def _nested(cls: type, value: Any, path: str) -> Any:
@@ -132,13 +129,11 @@ def _fill(cls: type, data: dict, prefix: str) -> Any:
         path = f"{prefix}.{f.name}" if prefix else f.name
         t = f.type
         if t.kind != "scalar":
-            kwargs[a] = _array(t, value, path)
+            kwargs[a] = _array(t, value, path, cls._nested_classes.get(f.name))
         elif t.is_primitive:
             kwargs[a] = _scalar(t.base, value, path, t.string_bound)
         else:
-            from ..typestore import message_class
-
-            kwargs[a] = _nested(message_class(t.base), value, path)
+            kwargs[a] = _nested(cls._nested_classes[f.name], value, path)
     return cls(**kwargs)
 
 
