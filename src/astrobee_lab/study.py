@@ -410,5 +410,8 @@ def _raise_on_sigterm():
 
 
 def table_without_costs(rows: Iterable[dict]) -> list[dict]:
-    """Rows without the columns that measure the machine (for comparing two runs)."""
-    return [{k: v for k, v in r.items() if k not in COST_COLUMNS} for r in rows]
+    """Rows without the columns that measure the machine (for comparing two runs); a NaN
+    (a metric with no value) compares equal to a NaN."""
+    def same(v):
+        return "nan" if isinstance(v, float) and v != v else v
+    return [{k: same(v) for k, v in r.items() if k not in COST_COLUMNS} for r in rows]
