@@ -296,6 +296,27 @@ def build_scenario(spec: dict):
                            source="study").apply(base)
 
 
+def _block_size(block: Any, seeds: list[int]) -> int:
+    """How many flights a block expands to, counted from its sizes alone (so a huge grid is
+    refused before anything is built; malformed parts count 1 and are refused later)."""
+    if not isinstance(block, dict):
+        return 1
+    grid = block.get("grid") if isinstance(block.get("grid"), dict) else {}
+    n = 1
+    for k, v in grid.items():
+        if k != "seed" and isinstance(v, list):
+            n *= max(1, len(v))
+    seed_axis = grid.get("seed")
+    block_seeds = block.get("seeds", seeds)
+    n *= len(seed_axis) if isinstance(seed_axis, list) else (
+        len(block_seeds) if isinstance(block_seeds, list) else 1)
+    random = block.get("random")
+    count = random.get("count", 1) if isinstance(random, dict) else 1
+    if isinstance(count, int) and not isinstance(count, bool) and count > 1:
+        n *= count
+    return n
+
+
 def _expand_block(block: dict, bi: int, base: dict, seeds: list[int], controllers: dict,
                   where: str) -> list[tuple[dict, dict, str]]:
     """(flight values, swept values, block name) for every flight of one block."""
@@ -401,6 +422,9 @@ def parse_study(data: Any, default_name: str = "study", where: str = "study",
         raise StudyError(f"{where}: give blocks, or a top-level grid/random/set, not both")
     if not isinstance(blocks, list) or not blocks:
         raise StudyError(f"{where}: blocks must be a non-empty list of mappings")
+    planned = sum(_block_size(b, seeds) for b in blocks)
+    if planned > MAX_FLIGHTS:
+        raise StudyError(f"{where}: more than {MAX_FLIGHTS} flights ({planned} asked)")
     flights: list[FlightSpec] = []
     scenarios_ok: set[str] = set()
     for bi, block in enumerate(blocks):

@@ -252,3 +252,19 @@ def test_the_report_states_intervals_pairs_and_is_one_html_page(tmp_path):
     assert sorted(base64.b64decode(s.split(",", 1)[1]) for s in page.images) == \
         sorted(p.read_bytes() for p in pngs)
     assert not page.xlinks                                    # nothing fetched from elsewhere
+
+
+def test_a_huge_grid_is_refused_before_anything_is_built(tmp_path, capsys):
+    """99 x 1000 x 10 flights: the limit is checked from the sizes (it took 89 s and 3.9 GB
+    when checked after building them)."""
+    import tracemalloc
+    data = dict(SMALL, seeds=list(range(10)),
+                grid={"controller": ["pd"] * 99, "bag_mass": [5.0 + i * 0.001 for i in range(1000)]})
+    p = tmp_path / "huge.yaml"
+    p.write_text(yaml.safe_dump(data))
+    tracemalloc.start()
+    with pytest.raises(StudyError, match="more than 100000 flights"):
+        load_study(p)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 50e6          # bytes: nothing built (a flight spec is ~4 KB)
