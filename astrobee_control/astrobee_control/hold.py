@@ -11,7 +11,7 @@ from astrobee.msgconv import MotionState
 
 from .law import BagObservation, Step, carried_mass
 from .mass import MassProperties
-from .pd import MODE_STOP, PdTracker, Reference, State
+from .pd import MODE_STOP, PdFeedback, Reference, State
 from .reference import SampledTrajectory
 
 STOPPED = MotionState.STOPPED
@@ -23,7 +23,7 @@ class HoldLaw:
     name = "hold"
 
     def __init__(self, flight_mode: FlightMode, mass: MassProperties, ) -> None:
-        self.pd = PdTracker(flight_mode, mass)
+        self.pd = PdFeedback(flight_mode, mass)
         self.robot_mass = mass
         self.state = STOPPED
         self.segment_result = ""

@@ -2,7 +2,7 @@
 
 A law is transport-free. controller_node (the ROS edge) feeds it states, segments, the flight
 mode, the carried bag and stop requests, and publishes the Step it returns each tick. The PD
-tracker (tracking.Tracker) is one law, the sampling MPC another; `HoldLaw` below is the
+law (tracking.PdLaw) is one law, the sampling MPC another; `hold.HoldLaw` is the
 smallest one (hold the start pose), used by the tests to prove a second law plugs in.
 
 Contract (times in seconds of sim time; frames as in pd.py):

@@ -12,7 +12,7 @@ Every `replan_period` seconds while a segment is being followed:
    model A closed-form, or the pybullet model B) for the whole horizon, all N at once;
 4. score each (tracking error to the nominal, clearance of robot AND bag corners to the keep-in
    union with a collision penalty, effort, bag-robot relative speed) and execute the best: the
-   law's Tracker (tracking.Tracker, the PD law's state machine) is handed the chosen candidate
+   law's tracker (tracking.PdLaw, the PD law's state machine) is handed the chosen candidate
    followed by the rest of the nominal, so CONTROLLING/STOPPING/STOPPED, stop, rehold and
    segment_result behave exactly as with the PD law.
 
@@ -44,7 +44,7 @@ from .pd import State
 from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStart, rotate_by
 from .reference import SampledTrajectory
 from .registry import Controller
-from .tracking import CONTROLLING, SETTLE_TIME, Tracker, check_settle_time
+from .tracking import CONTROLLING, SETTLE_TIME, PdLaw, check_settle_time
 
 _CUBE = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
@@ -60,7 +60,7 @@ class MpcLaw(AttitudeMode):
         from astrobee import config as cfg
         self.config = (config or MpcConfig()).validate()
         self.model = model
-        self.tracker = Tracker(flight_mode, mass, settle_time=settle_time)
+        self.tracker = PdLaw(flight_mode, mass, settle_time=settle_time)
         self.keep_in = KeepIn(cfg.keep_in_boxes() if keep_in is None else keep_in)
         self.rng = np.random.default_rng(self.config.seed)
         self.nominal: SampledTrajectory | None = None
@@ -75,7 +75,7 @@ class MpcLaw(AttitudeMode):
         self._hold_end = 0.0
         self._centre = np.zeros(3)
 
-    # ---- ControlLaw plumbing: the Tracker's state machine -------------------------------
+    # ---- ControlLaw plumbing: the PD law's state machine -------------------------------
     @property
     def state(self) -> int:
         return self.tracker.state
@@ -129,7 +129,7 @@ class MpcLaw(AttitudeMode):
         self.tracker.rehold(state, why)
 
     def update(self, state: State, now: float, dt: float) -> Step:
-        """One control tick: replan when due, then the Tracker's PD step on the chosen plan."""
+        """One control tick: replan when due, then the PD law's step on the chosen plan."""
         decision = None
         if (self.tracker.state == CONTROLLING and self.nominal is not None
                 and now >= self._next_replan and now < self.nominal.end_time + self._delay):

@@ -56,7 +56,7 @@ class AttitudeMode:
         """Attitude mode: the pause candidate at the segment's end. While the pair is still
         turning or off the final attitude when the plan is about to end, hold the final pose
         one replan period more (booked as delay, at most max_delay in all): the torque-limited
-        attitude gets that time before the Tracker's settle time starts (the MPC keeps
+        attitude gets that time before the PD law's settle time starts (the MPC keeps
         deciding meanwhile). With `hold_about_centre` (off: measured worse, see README) the
         held position is instead where the robot is when the pair's centre of mass sits at the
         goal's, re-aimed every tick, so the pair turns about its centre of mass (inertia I_c,

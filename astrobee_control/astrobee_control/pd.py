@@ -78,8 +78,9 @@ class Output:
     saturated: bool
 
 
-class PdTracker:
-    """Astrobee-style PD(+I) tracker; holds only the integrator state between steps."""
+class PdFeedback:
+    """Astrobee-style PD(+I) feedback: one wrench per state and reference; holds only the
+    integrator state between steps (the PD law around it is tracking.PdLaw)."""
 
     def __init__(self, flight_mode: FlightMode, mass: MassProperties,
                  integral_limit_pos: float = 0.5, integral_limit_att: float = 0.5,
@@ -158,3 +159,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _clamp_norm(v: np.ndarray, limit: float) -> np.ndarray:
     n = float(np.linalg.norm(v))
     return v * (limit / n) if n > limit else v
+
+
+PdTracker = PdFeedback     # its former name (many call sites)

@@ -19,7 +19,7 @@ from astrobee.msgconv import MotionState
 
 from .law import BagObservation, Step, carried_mass  # noqa: F401 - Step: old import path
 from .mass import MassProperties
-from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdTracker, Reference, State
+from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdFeedback, Reference, State
 from .reference import SampledTrajectory
 from .registry import Controller
 
@@ -40,16 +40,16 @@ PARAMETERS = {
 }
 
 
-class Tracker:
-    """Segment follower: a PdTracker plus the IDLE/CONTROLLING/STOPPING/STOPPED logic (the PD
-    ControlLaw)."""
+class PdLaw:
+    """The PD ControlLaw: a segment follower, PdFeedback plus the IDLE/CONTROLLING/STOPPING/
+    STOPPED logic."""
 
     name = "pd"
 
     def __init__(self, flight_mode: FlightMode, mass: MassProperties,
                  settle_time: float = SETTLE_TIME,
                  hold_on_start: bool = True) -> None:
-        self.pd = PdTracker(flight_mode, mass)
+        self.pd = PdFeedback(flight_mode, mass)
         self.robot_mass = mass
         self.carrying = False
         self.settle_time = settle_time
@@ -157,6 +157,9 @@ class Tracker:
         return Step(out, ref, mode, self.state, event)
 
 
+Tracker = PdLaw    # its former name (many call sites)
+
+
 def check_settle_time(value: Any) -> float:
     """A settle_time parameter (s, > 0), as a float; ValueError with one line otherwise."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
@@ -171,11 +174,11 @@ def check_params(params: dict) -> None:
         raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")
 
 
-def make_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> Tracker:
+def make_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> PdLaw:
     """The PD law of the parameters (PARAMETERS' names; ValueError with one line for a bad value).
     pd_controller_node and in-process flights build their law here."""
     params = {**PARAMETERS, **params}
-    return Tracker(flight_mode, mass, settle_time=check_settle_time(params["settle_time"]),
+    return PdLaw(flight_mode, mass, settle_time=check_settle_time(params["settle_time"]),
                    hold_on_start=bool(params["hold_on_start"]))
 
 
