@@ -38,7 +38,8 @@ import os
 from pathlib import Path
 
 from astrobee.config import load_yaml
-from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
+from astrobee.overrides import (BAG_MODELS, FEM_SOLVERS, NO_BAG, OVERRIDE_KEYS, Overrides,
+                                parse_overrides)
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
 from astrobee_control import registry
@@ -71,11 +72,11 @@ ARGUMENTS = {
                "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
     "demo": ("false", "fly DEMO_LEGS (no bag, FEM bag with PD, FEM bag with MPC), the sim reset between"),
-    "bag_model": ("", "scenario override: fem | constraint | composite | rigid"),
+    "bag_model": ("", f"scenario override: {' | '.join(BAG_MODELS + (NO_BAG,))}"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
     "bag_mass": ("", "scenario override: cargo bag mass in kg"),
-    "fem_solver": ("", "scenario override: the FEM bag's solver (e.g. fast)"),
+    "fem_solver": ("", f"scenario override: the FEM bag's solver ({' | '.join(FEM_SOLVERS)})"),
     "grasp": ("", "scenario override: how the gripper holds the bag's handle: strap | hinge | "
               "clamp (astrobee_sim.grasp)"),
     "flight_mode": ("", "scenario override: a flight mode (e.g. nominal, quiet)"),
