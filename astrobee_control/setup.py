@@ -28,9 +28,12 @@ setup(
             'controller_node = astrobee_control.controller_node:generic_main',
         ],
         # the controller registry (astrobee_control.registry), as pyproject.toml declares it
+        # (tests/control/test_controller_registry.py checks they agree)
         "astrobee.controllers": [
-            'pd = astrobee_control.tracking:CONTROLLER',
-            'mpc = astrobee_control.mpc:CONTROLLER',
+            "pd = astrobee_control.tracking:CONTROLLER",
+            "mpc = astrobee_control.mpc:CONTROLLER",
+            "pair = astrobee_control.pair_law:CONTROLLER",
+            "wmpc = astrobee_control.wrench_mpc:CONTROLLER",
         ],
     },
 )

@@ -113,3 +113,16 @@ def test_a_third_law_appears_everywhere(third_law, tmp_path):
                          text=True, timeout=60)
     assert out.returncode == 1 and "controller_node: error: gain must be > 0, got -2.0" in \
         out.stderr, out.stderr
+
+
+def test_the_ament_package_registers_the_same_laws():
+    """astrobee_control/setup.py (colcon builds) lists the laws pyproject.toml registers."""
+    import re
+    import tomllib
+    root = Path(__file__).resolve().parents[2]
+    project = tomllib.loads((root / "pyproject.toml").read_text())
+    declared = project["project"]["entry-points"][registry.GROUP]
+    text = (root / "astrobee_control" / "setup.py").read_text()
+    block = text[text.index(f'"{registry.GROUP}"'):]
+    block = block[:block.index("]")]
+    assert dict(re.findall(r'"(\w+) = ([\w.]+:\w+)"', block)) == declared
