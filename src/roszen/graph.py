@@ -8,7 +8,7 @@ from typing import Callable, Optional
 
 import zenoh
 
-from .wire import ADMIN_SPACE, CLIENT, NODE, PUB, SERVICE, SUB, Entity, parse_token
+from .wire import ADMIN_SPACE, CLIENT, NODE, PUB, SERVICE, SUB, parse_token
 
 
 class GraphCache:
