@@ -480,12 +480,27 @@ _SKEW = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0],
 
 
 def _log_so3(E: np.ndarray) -> np.ndarray:
-    """Rotation vectors (N, 3) of rotation matrices E (N, 3, 3)."""
+    """Rotation vectors (N, 3) of rotation matrices E (N, 3, 3). Near pi the skew part vanishes,
+    so the axis comes from the symmetric part (E + E^T)/2 = cos a 1 + (1 - cos a) k k^T: its
+    largest diagonal column, signed by the skew part where that is still non-zero."""
     f = E.reshape(-1, 9)
     s = 0.5 * (f[:, [7, 2, 3]] - f[:, [5, 6, 1]])
     ang = np.arccos(np.clip(0.5 * (f[:, 0] + f[:, 4] + f[:, 8] - 1.0), -1.0, 1.0))
     sn = np.sqrt(np.sum(s * s, -1))
-    return s * np.where(sn > 1e-9, ang / np.maximum(sn, 1e-12), 1.0)[:, None]
+    out = s * np.where(sn > 1e-9, ang / np.maximum(sn, 1e-12), 1.0)[:, None]
+    near = (ang > np.pi - 1e-3) & (sn < 1e-3 * np.pi)
+    if np.any(near):
+        Es = E.reshape(-1, 3, 3)[near]
+        B = 0.5 * (Es + Es.transpose(0, 2, 1))
+        c = np.cos(ang[near])[:, None, None]
+        kk = (B - c * np.eye(3)) / np.maximum(1.0 - c, 1e-12)       # k k^T
+        diag = np.diagonal(kk, axis1=1, axis2=2)
+        j = np.argmax(diag, axis=1)
+        col = kk[np.arange(len(j)), :, j]
+        k = col / np.sqrt(np.maximum(diag[np.arange(len(j)), j], 1e-12))[:, None]
+        sgn = np.where(np.sum(k * s[near], -1) < 0, -1.0, 1.0)[:, None]
+        out[near] = sgn * k * ang[near][:, None]
+    return out
 
 
 def simulate_pendulum(handle: PendulumParams, bag_mass: float, t: np.ndarray,

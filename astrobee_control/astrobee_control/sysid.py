@@ -247,3 +247,98 @@ def horizon_error(handle, rec: Recording, flight_mode, horizon: float = 5.0,
     eb, er = np.concatenate(eb), np.concatenate(er)
     return {"bag_rms": float(np.sqrt(np.mean(eb ** 2))), "bag_max": float(eb.max()),
             "robot_rms": float(np.sqrt(np.mean(er ** 2)))}
+
+
+# ---- the pair model with the swing (pair_model.PairParams) ------------------------------------
+@dataclass
+class PairRecording:
+    """Truth states of a pushed flight sampled at every control tick, with the wrench applied
+    over the following tick (body frame, boxed): what the pair model is fitted on."""
+
+    t: np.ndarray
+    x: np.ndarray          # (T, 26) pair_model states (bag frame: aligned with the robot at t[0])
+    bag_position: np.ndarray
+    wrench: np.ndarray     # (T, 6)
+
+
+def pair_states(robot_position, robot_velocity, robot_q, robot_omega_world, bag_q, bag_omega_world,
+                wrench) -> np.ndarray:
+    """pair_model states (T, 26) from truth samples (T, ...); the bag frame is the bag's
+    orientation turned so that it is the robot's at the first sample."""
+    from . import pair_model as pm
+    q_rel0 = rot.multiply(rot.conjugate(robot_q[0]), bag_q[0])        # bag in robot frame at t0
+    qb = np.array([rot.normalize(rot.multiply(q, rot.conjugate(q_rel0))) for q in bag_q])
+    wr = np.array([rot.rotate_inverse(q, w) for q, w in zip(robot_q, robot_omega_world)])
+    wb = np.array([rot.rotate_inverse(q, w) for q, w in zip(qb, bag_omega_world)])
+    return np.concatenate([robot_position, robot_velocity, robot_q, wr, qb, wb, wrench], 1) \
+        if len(robot_q) else np.zeros((0, pm.NX))
+
+
+def pair_windows(recs: list[PairRecording], horizon: float, every: float = 0.5) -> tuple:
+    """Windows of `horizon` s starting every `every` s: start states (W, 26), wrenches
+    (W, K, 6), the recorded robot and bag positions after each step (W, K, 3) x 2, and dt."""
+    dt = float(np.median(np.diff(recs[0].t)))
+    k = int(round(horizon / dt))
+    stride = max(1, int(round(every / dt)))
+    x0, us, pr, pb = [], [], [], []
+    for r in recs:
+        for s in range(0, len(r.t) - k - 1, stride):
+            x0.append(r.x[s])
+            us.append(r.wrench[s:s + k])
+            pr.append(r.x[s + 1:s + 1 + k, 0:3])
+            pb.append(r.bag_position[s + 1:s + 1 + k])
+    return np.array(x0), np.array(us), np.array(pr), np.array(pb), dt
+
+
+def pair_errors(params, windows, horizons=(1.0, 2.0, 5.0), substeps: int = 2) -> dict:
+    """Open-loop prediction errors of the pair model under the recorded wrench: RMS over
+    windows of the robot's and the bag centre's position error at each horizon (m)."""
+    from . import pair_model as pm
+    x0, us, pr, pb, dt = windows
+    x0 = x0.copy()
+    x0[:, pm.A] = us[:, 0]
+    xs = pm.rollout(x0, us, dt, params, substeps=substeps)[:, 1:]
+    bag, _ = pm.bag_centre(xs, params)
+    out = {}
+    for h in horizons:
+        i = int(round(h / dt)) - 1
+        if i < us.shape[1]:
+            out[f"robot_{h:g}s"] = float(np.sqrt(np.mean(np.sum((xs[:, i, :3] - pr[:, i]) ** 2, -1))))
+            out[f"bag_{h:g}s"] = float(np.sqrt(np.mean(np.sum((bag[:, i] - pb[:, i]) ** 2, -1))))
+    return out
+
+
+def fit_pair(base, windows, max_nfev: int = 20, substeps: int = 2):
+    """Least squares of the pair model's joint (log stiffness, log damping per robot axis), the
+    bag's drag and the grasp point on the robot (the bag's grasp point follows from the mean
+    rest offset) on the windows' robot and bag position errors."""
+    from scipy.optimize import least_squares
+
+    from . import pair_model as pm
+    x0s, us, pr, pb, dt = windows
+    rest = np.asarray(base.rest_offset())
+    x0s = x0s.copy()
+    x0s[:, pm.A] = us[:, 0]
+
+    def unpack(z):
+        g = z[7:10]
+        return base.with_(stiffness=tuple(np.exp(z[0:3])), damping=tuple(np.exp(z[3:6])),
+                          bag_drag=float(np.exp(z[6])), grasp_robot=tuple(g),
+                          grasp_bag=tuple(g - rest))
+
+    def res(z):
+        p = unpack(z)
+        xs = pm.rollout(x0s, us, dt, p, substeps=substeps)[:, 1:]
+        bag, _ = pm.bag_centre(xs, p)
+        return np.concatenate([(xs[..., :3] - pr).ravel(), (bag - pb).ravel()])
+
+    z0 = np.concatenate([np.log(np.maximum(base.stiffness, 1e-3)),
+                         np.log(np.maximum(base.damping, 1e-3)), [np.log(max(base.bag_drag, 1e-2))],
+                         np.asarray(base.grasp_robot, float)])
+    g0 = np.asarray(base.grasp_robot, float)
+    lo = np.concatenate([np.full(7, np.log(1e-4)), g0 - 0.1])
+    # bounds: a strap's twist, not a clamp (stiffer joints need smaller steps than the oracle's)
+    hi = np.concatenate([np.full(3, np.log(5.0)), np.full(3, np.log(2.0)), [np.log(20.0)], g0 + 0.1])
+    sol = least_squares(res, np.clip(z0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi), x_scale="jac",
+                        max_nfev=max_nfev, diff_step=1e-3)
+    return unpack(sol.x)

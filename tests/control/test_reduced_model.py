@@ -56,3 +56,60 @@ def test_rigid_body_rollout_turns_the_pair_under_an_off_centre_force():
     rel = out.bag_position[1, -1] - out.robot_position[1, -1]
     assert np.allclose(rel, rotate_by(out.bag_turn[1, -1], np.array([-0.48, 0.0, -0.06])),
                        atol=1e-6)
+
+
+# ---- _log_so3 near pi and the pair model with the swing --------------------------------------
+def test_log_so3_is_right_at_and_near_pi():
+    from astrobee_control.reduced_model import _exp_so3, _log_so3
+    rng = np.random.default_rng(3)
+    k = rng.normal(size=(8, 3))
+    k /= np.linalg.norm(k, axis=1)[:, None]
+    for ang in (np.pi, np.pi - 1e-6, np.pi - 1e-3, 2.0):
+        v = k * ang
+        got = _log_so3(_exp_so3(v))
+        assert np.allclose(np.linalg.norm(got, axis=1), ang, atol=1e-6)
+        assert np.allclose(_exp_so3(got), _exp_so3(v), atol=1e-6)
+
+
+def _random_pair_state(rng, pm):
+    def q():
+        v = rng.normal(size=4)
+        return v / np.linalg.norm(v)
+    return pm.state(rng.normal(size=3), 0.05 * rng.normal(size=3), q(), 0.2 * rng.normal(size=3),
+                    q(), 0.3 * rng.normal(size=3), 0.1 * rng.normal(size=6))
+
+
+def test_pair_model_conserves_momentum_without_input():
+    from astrobee_control import pair_model as pm
+    p = pm.PairParams().with_(lag=0.0)
+    x = _random_pair_state(np.random.default_rng(0), pm)
+    lin0, ang0 = pm.momentum(x, p)
+    xs = pm.rollout(x, np.zeros((625, 6)), 0.016, p)        # 10 s, joint spring working
+    lin1, ang1 = pm.momentum(xs[-1], p)
+    assert np.allclose(lin1, lin0, atol=1e-9)
+    assert np.allclose(ang1, ang0, atol=1e-6)
+    assert np.linalg.norm(xs[-1, pm.W_B] - xs[0, pm.W_B]) > 1e-3    # something did move
+
+
+def test_pair_model_coarse_steps_match_a_350_hz_integration():
+    from astrobee_control import pair_model as pm
+    rng = np.random.default_rng(1)
+    p = pm.PairParams().with_(lag=0.2, bag_drag=0.5)
+    x = _random_pair_state(rng, pm)
+    lim = (np.array([0.68, 0.33, 0.39]), np.array([0.068, 0.033, 0.039]))
+    us = rng.uniform(-1, 1, (10, 6)) * np.concatenate(lim)          # 5 s of 0.5 s commands
+    coarse = pm.rollout(x, us, 0.5, p, limits=lim)[-1]
+    fine = pm.rollout(x, np.repeat(us, 175, axis=0), 1 / 350, p, limits=lim)[-1]
+    bc, _ = pm.bag_centre(coarse, p)
+    bf, _ = pm.bag_centre(fine, p)
+    assert np.linalg.norm(coarse[:3] - fine[:3]) < 1e-3
+    assert np.linalg.norm(bc - bf) < 1e-3
+
+
+def test_pair_parameters_are_read_from_one_file():
+    from astrobee_control import pair_model as pm
+    p = pm.load("fem")
+    assert p.bag_mass > 0 and min(p.bag_inertia) > 0
+    assert pm.PairParams.from_dict(p.to_dict()) == p
+    with pytest.raises(ValueError, match="unknown key"):
+        pm.PairParams.from_dict({"stifness": [1, 1, 1]})

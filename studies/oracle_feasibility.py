@@ -1,0 +1,71 @@
+"""The oracle's feasibility per bump size on Node 2 -> JEM (nominal mode, strap grasp's reduced
+pair model): bumps of 2.5 / 5 / 7.5 / 10 N for 0.2 s on the bag at the study runner's seeded
+time U(10, 30) s and direction (astrobee_lab.oracle.solve.bump_of_seed), seeds 0..19.
+
+    python studies/oracle_feasibility.py [--seeds 20] [--out studies/results/oracle/feasibility.csv]
+
+Resumable: rows already in the CSV are skipped. Prints the table of docs/results/oracle.md.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import time
+
+from astrobee_control import pair_model as pm
+from astrobee_lab.oracle import solve as so
+
+MAGNITUDES = (2.5, 5.0, 7.5, 10.0)
+FIELDS = ["magnitude", "seed", "bump_time", "fx", "fy", "fz", "feasible", "status", "solve_time",
+          "nodes", "box", "goal", "attitude", "rest_speed", "rest_omega"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--out", default="studies/results/oracle/feasibility.csv")
+    ap.add_argument("--magnitudes", type=float, nargs="*", default=list(MAGNITUDES))
+    a = ap.parse_args()
+    params = pm.load("fem")
+    leg = so.plan_leg("node2_to_jem_bag")
+    done = set()
+    if os.path.exists(a.out):
+        with open(a.out) as f:
+            done = {(float(r["magnitude"]), int(r["seed"])) for r in csv.DictReader(f)}
+    new = not os.path.exists(a.out)
+    with open(a.out, "a", newline="") as f:
+        w = csv.DictWriter(f, FIELDS)
+        if new:
+            w.writeheader()
+        for mag in a.magnitudes:
+            for seed in range(a.seeds):
+                if (mag, seed) in done:
+                    continue
+                b = so.bump_of_seed(seed, mag)
+                t = time.perf_counter()
+                r = so.solve(leg, params, b)
+                row = {"magnitude": mag, "seed": seed, "bump_time": b.time,
+                       "fx": round(b.force[0], 4), "fy": round(b.force[1], 4),
+                       "fz": round(b.force[2], 4), **r.row()}
+                w.writerow(row)
+                f.flush()
+                print(row, f"{time.perf_counter() - t:.1f}s", flush=True)
+    table(a.out)
+
+
+def table(path: str) -> None:
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    print("| bump (N) | feasible / seeds | median solve time (s) | max solve time (s) |")
+    print("|---|---|---|---|")
+    for mag in sorted({float(r["magnitude"]) for r in rows}):
+        rs = [r for r in rows if float(r["magnitude"]) == mag]
+        ok = sum(r["feasible"] == "True" for r in rs)
+        ts = [float(r["solve_time"]) for r in rs]
+        print(f"| {mag:g} | {ok} / {len(rs)} | {statistics.median(ts):.1f} | {max(ts):.1f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,70 @@
+"""The oracle (astrobee_lab.oracle): its CasADi model is the numeric pair model, and a tiny
+planted problem answers feasible without a bump and infeasible with an impossible budget."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("casadi")
+
+from astrobee import flight_modes  # noqa: E402
+from astrobee_control import pair_model as pm  # noqa: E402
+from astrobee_lab.oracle import model, solve as so  # noqa: E402
+
+Q = np.array([0.0, 0.0, -0.7071067811865476, 0.7071067811865476])     # facing -y (Node 2 -> JEM)
+START = np.array([10.95, 0.0, 4.84])
+
+
+def _random_states(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 2, 4))
+    q /= np.linalg.norm(q, axis=2, keepdims=True)
+    return np.concatenate([rng.normal(size=(n, 3)), 0.1 * rng.normal(size=(n, 3)), q[:, 0],
+                           0.2 * rng.normal(size=(n, 3)), q[:, 1], 0.3 * rng.normal(size=(n, 3)),
+                           0.2 * rng.normal(size=(n, 6))], 1)
+
+
+def test_casadi_form_is_the_numeric_form():
+    p = pm.PairParams().with_(lag=0.3, bag_drag=0.7, stiffness=(0.5, 0.1, 0.2), damping=(0.1, 0.05, 0.0))
+    f = model.casadi_derivative(p)
+    F = model.casadi_step(p, substeps=2)
+    rng = np.random.default_rng(1)
+    xs = _random_states(6)
+    us, bs = rng.normal(size=(6, 6)), rng.normal(size=(6, 3))
+    num = pm.xdot(xs, us, bs, p)
+    step = pm.rk4(xs, us, bs, p, 0.5, substeps=2)
+    for i in range(6):
+        assert np.allclose(np.asarray(f(xs[i], us[i], bs[i])).ravel(), num[i], rtol=1e-10, atol=1e-12)
+        assert np.allclose(np.asarray(F(xs[i], us[i], bs[i], 0.5)).ravel(), step[i], atol=1e-10)
+
+
+def _leg(offset: np.ndarray) -> so.Leg:
+    goal = START + offset
+    return so.Leg(np.array([0.0]), goal[None], np.zeros((1, 3)), np.zeros((1, 3)), Q[None], goal, Q,
+                  flight_modes.get("nominal"), np.array([0.50, 0.42, 0.25]))
+
+
+def _start(p: pm.PairParams) -> np.ndarray:
+    return pm.state(START, np.zeros(3), Q, np.zeros(3), Q, np.zeros(3))
+
+
+def test_oracle_finds_a_planted_move_feasible_without_a_bump():
+    p = pm.PairParams()
+    r = so.solve(_leg(np.array([0.0, -0.35, 0.0])), p, None, budget=12.0, x0=_start(p), jit=False)
+    assert r.feasible, r.row()
+    assert r.violation["goal"] <= 0.2 and r.violation["rest_speed"] < 0.01
+
+
+def test_oracle_calls_an_impossible_budget_infeasible():
+    p = pm.PairParams()
+    r = so.solve(_leg(np.array([0.0, -1.5, 0.0])), p, None, budget=4.0, x0=_start(p), jit=False)
+    assert not r.feasible
+    assert r.violation["goal"] > 0.2
+
+
+def test_bump_of_seed_is_the_simulators_draw():
+    b = so.bump_of_seed(3, 5.0)
+    assert 10.0 <= b.time <= 30.0 and b.duration == pytest.approx(0.2, abs=1e-9)
+    assert np.linalg.norm(b.force) == pytest.approx(5.0)
+    assert so.bump_of_seed(3, 10.0).time == b.time            # the seed alone draws time, direction
+    assert np.allclose(np.asarray(so.bump_of_seed(3, 10.0).force), 2 * np.asarray(b.force))
