@@ -64,9 +64,15 @@ class CompositeBag(RigidPartsBag):
                 self.links.append(cid)
 
     def grasp(self, k: int, robot) -> None:
+        """The grasp model's joint on the handle's block with the five handle constraints'
+        budget; clamp: the five spread soft constraints of the seed's model."""
         part = self.part_for_handle(k)
-        st = self.state()
         fmax = float(self.params.get("handle_max_force", 2.5))
+        self.hold_handle(k, robot, part, 5 * fmax, clamp=lambda: self._spread(k, robot, part, fmax))
+        self.ignore_collisions_with(robot.id)
+
+    def _spread(self, k: int, robot, part: int, fmax: float) -> None:
+        st = self.state()
         h = self.handles[k]
         ax = int(np.argmax(np.abs(h)))
         t1, t2 = [np.eye(3)[a] for a in range(3) if a != ax]
@@ -74,4 +80,3 @@ class CompositeBag(RigidPartsBag):
         for off in (np.zeros(3), t1 * spread, -t1 * spread, t2 * spread, -t2 * spread):
             wp = st.position + rot.rotate(st.orientation, self.handle_point(k) + off)
             self.p2p(robot, part, wp, fmax)
-        self.ignore_collisions_with(robot.id)

@@ -18,8 +18,14 @@ class ConstraintBag(RigidPartsBag):
         self.parts = [box_body(self.p, client, self.size / 2, self.mass, [0, 0, 0], [0, 0, 0, 1])]
 
     def grasp(self, k: int, robot) -> None:
+        """The grasp model's joint at the handle with the whole budget of the soft constraints
+        (num_constraints x max_force); clamp: the spread soft constraints of the seed's model."""
         n = int(self.params.get("num_constraints", 5))
         fmax = float(self.params.get("max_force", 2.5))
+        self.hold_handle(k, robot, 0, n * fmax, clamp=lambda: self._spread(k, robot, n, fmax))
+        robot_ignore(self, robot)
+
+    def _spread(self, k: int, robot, n: int, fmax: float) -> None:
         st = self.state()
         h = self.handles[k]
         ax = int(np.argmax(np.abs(h)))
@@ -29,7 +35,6 @@ class ConstraintBag(RigidPartsBag):
         for off in local:
             wp = st.position + rot.rotate(st.orientation, self.handle_point(k) + off)
             self.p2p(robot, 0, wp, fmax)
-        robot_ignore(self, robot)
 
 
 def robot_ignore(bag, robot) -> None:

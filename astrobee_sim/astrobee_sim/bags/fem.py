@@ -88,7 +88,11 @@ class FemBag(Bag):
         for ln in ("gripper", "arm_distal", "arm_proximal"):
             self.p.setCollisionFilterPair(self.id, robot.id, -1, robot.links[ln], 0,
                                           physicsClientId=self.client)
-        for node in self.mesh.handle_nodes[k]:
+        # the grasp model picks the pinned nodes (astrobee_sim.grasp): Bullet's anchors are rigid
+        # pins, so a strap is one pinned node (a ball joint, no twist spring), a hinge two
+        for node in self.grasp_model.bullet_nodes(self.mesh.nodes,
+                                                  np.asarray(self.mesh.handle_nodes[k]),
+                                                  self.handle_point(k), self.strap_axis(k)):
             self.anchors.append(self.p.createSoftBodyAnchor(self.id, int(node), robot.id, link,
                                                             physicsClientId=self.client))
 

@@ -1,8 +1,10 @@
 """The FEM bag integrated by our own solver (mass_spring) beside the pybullet robots and walls.
 
 Same tet mesh, mass and spring material as the Bullet soft body (fem.py), with no pybullet body
-for the bag: after each pybullet step the bag takes one semi-implicit step with its grasped
-nodes tied to the gripper's new pose by stiff implicit springs, then collides its nodes with the
+for the bag: after each pybullet step the bag takes one semi-implicit step with its handle held
+at the gripper's new pose as the grasp model says (astrobee_sim.grasp: strap = the handle
+patch's centroid on a stiff implicit spring + a twist spring, hinge = two centroids, clamp =
+every patch node on its own spring), then collides its nodes with the
 station's wall slabs and the robots' body boxes. Forces go both ways: the anchor springs' pull on
 the gripper and the robots' contact reactions are applied to the robots in pybullet before the
 next step (`before_step`). The whole bag state is a few numpy arrays, so snapshot/restore is

@@ -6,8 +6,6 @@ import tempfile
 
 import numpy as np
 
-from astrobee import rotations as rot
-
 from .rigid_base import RigidPartsBag
 
 
@@ -42,7 +40,7 @@ class RigidBag(RigidPartsBag):
         self.half_extents = [self.size / 2]
 
     def grasp(self, k: int, robot) -> None:
-        st = self.state()
-        wp = st.position + rot.rotate(st.orientation, self.handle_point(k))
-        self.p2p(robot, 0, wp, float(self.params.get("max_force", 500.0)))
+        """The grasp model's joint at the handle (strap: the ball joint this model always had,
+        now with the twist spring; clamp: a fixed joint), max_force shared by its points."""
+        self.hold_handle(k, robot, 0, float(self.params.get("max_force", 500.0)))
         self.ignore_collisions_with(robot.id)

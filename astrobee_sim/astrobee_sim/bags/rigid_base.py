@@ -53,6 +53,7 @@ class RigidPartsBag(Bag):
     def __init__(self, *a, **kw):
         super().__init__(*a, **kw)
         self.constraints: list[int] = []
+        self._twists: list[tuple] = []
         self._local_corners = None
         self._invalidate()
 
@@ -93,10 +94,82 @@ class RigidPartsBag(Bag):
         self.constraints.append(cid)
         return cid
 
+    def hold_handle(self, k: int, robot, part: int, max_force: float, clamp=None) -> None:
+        """Tie handle k to the robot's gripper as the grasp model says (astrobee_sim.grasp):
+        strap one point-to-point constraint at the grasp point + the twist spring (before_step),
+        hinge two along the strap, each with half of the handle's force budget `max_force`;
+        clamp: `clamp()` when the model gives one (its own pre-grasp-model hold), else a fixed
+        constraint."""
+        joint = self.grasp_model.joint(self.strap_axis(k))
+        if joint.fixed and clamp is not None:
+            clamp()
+            return
+        st = self.state()
+        hp = self.handle_point(k)
+        if joint.fixed:
+            self.fixed(robot, part, st.position + rot.rotate(st.orientation, hp), max_force)
+        else:
+            for off in joint.points:
+                wp = st.position + rot.rotate(st.orientation, hp + np.asarray(off))
+                self.p2p(robot, part, wp, max_force / len(joint.points))
+        if joint.twist_stiffness or joint.twist_damping:
+            p, c = self.p, self.client
+            ls = p.getLinkState(robot.id, robot.links["gripper"], computeForwardKinematics=True,
+                                physicsClientId=c)
+            _, qp = p.getBasePositionAndOrientation(self.parts[part], physicsClientId=c)
+            axis_w = rot.rotate(st.orientation, self.strap_axis(k))
+            normal_w = rot.rotate(st.orientation, self.handles[k])
+            self._twists.append((robot, part,
+                                 rot.rotate_inverse(np.asarray(qp), axis_w),       # part frame
+                                 rot.rotate_inverse(np.asarray(ls[5]), axis_w),    # gripper frame
+                                 rot.rotate_inverse(np.asarray(ls[5]), normal_w),
+                                 joint.twist_stiffness, joint.twist_damping))
+
+    def fixed(self, robot, part: int, world_point, max_force: float) -> int:
+        """A fixed constraint between the robot's gripper and `part` at a world point."""
+        p, c = self.p, self.client
+        link = robot.links["gripper"]
+        ls = p.getLinkState(robot.id, link, computeForwardKinematics=True, physicsClientId=c)
+        body = self.parts[part]
+        bp, bq = p.getBasePositionAndOrientation(body, physicsClientId=c)
+        rel = rot.multiply(rot.conjugate(np.asarray(ls[1])), np.asarray(bq))
+        cid = p.createConstraint(robot.id, link, body, -1, p.JOINT_FIXED, [0, 0, 0],
+                                 to_frame(ls[0], ls[1], world_point), to_frame(bp, bq, world_point),
+                                 parentFrameOrientation=rel.tolist(), physicsClientId=c)
+        p.changeConstraint(cid, maxForce=max_force, physicsClientId=c)
+        self.constraints.append(cid)
+        return cid
+
+    def before_step(self, dt: float) -> None:
+        """The strap's twist spring: torque -(k angle + c rate) about the handle normal on the
+        bag part, its reaction on the gripper (astrobee_sim.grasp.twist_forces' rule)."""
+        if not self._twists:
+            return
+        p, c = self.p, self.client
+        for robot, part, u_part, u_grip, n_grip, k, cd in self._twists:
+            link = robot.links["gripper"]
+            ls = p.getLinkState(robot.id, link, computeLinkVelocity=1,
+                                computeForwardKinematics=1, physicsClientId=c)
+            body = self.parts[part]
+            _, qp = p.getBasePositionAndOrientation(body, physicsClientId=c)
+            wp = p.getBaseVelocity(body, physicsClientId=c)[1]
+            qg = np.asarray(ls[5])
+            n = rot.rotate(qg, n_grip)
+            u = rot.rotate(qg, u_grip)
+            e = rot.rotate(np.asarray(qp), u_part)
+            ep = e - np.dot(e, n) * n
+            ang = np.arctan2(np.dot(np.cross(u, ep), n), np.dot(u, ep))
+            rate = np.dot(np.subtract(wp, ls[7]), n)
+            tau = (-(k * ang + cd * rate) * n).tolist()
+            p.applyExternalTorque(body, -1, tau, p.WORLD_FRAME, physicsClientId=c)
+            p.applyExternalTorque(robot.id, link, [-t for t in tau], p.WORLD_FRAME,
+                                  physicsClientId=c)
+
     def release(self) -> None:
         for cid in self.constraints:
             self.p.removeConstraint(cid, physicsClientId=self.client)
         self.constraints = []
+        self._twists = []
         self.attached = [False] * len(self.handles)
         self._invalidate()
 

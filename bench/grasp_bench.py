@@ -1,0 +1,94 @@
+"""The FEM bag's cost per grasp model (astrobee_sim.grasp): strap (the default) vs hinge vs clamp.
+
+Library real-time factor of the fast FEM bag (~400 nodes) while a PD law drags it (sim_rtf.py's
+library loop: physics 350 Hz, one command per 16 ms tick, bag state + clearance + contacts every
+tick), by the wall clock and per CPU second, rounds interleaved (medians); then batched
+rollouts (K=64 copies, fem_rollout) per grasp in bag-seconds per CPU second. References: the
+clamp in the same run, and docs/benchmarks.md's fast solver at 412 nodes (fem_fast_bench.py:
+9.6x per CPU s quiet; ~5.7x per CPU s in the issue's run).
+
+    .venv/bin/python bench/grasp_bench.py [--rounds 3] [--seconds 2]
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from sim_rtf import goal_at, pd_wrench
+
+GRASPS = ("strap", "hinge", "clamp")
+REF_CPU = "9.6x per CPU s (fem_fast_bench, quiet); ~5.7x (issue 24's run)"
+
+
+def library(grasp: str, res: int, seconds: float) -> tuple[float, float, int]:
+    """(wall, CPU) real-time factor of the library loop with the fast FEM bag held by `grasp`."""
+    from astrobee_sim.simulation import Simulation
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=res, fem_solver="fast",
+                     grasp=grasp)
+    try:
+        start, q0 = sim.robot_state()[:2]
+        sim.clearance()
+        t0, c0 = time.perf_counter(), time.process_time()
+        tick = 0
+        while sim.time < seconds:
+            pos, q, v, w = sim.robot_state()
+            sim.command(pd_wrench(pos, q, v, w, goal_at(sim.time, start), q0))
+            tick += 1
+            sim.step(max(1, int(round(tick * 0.016 / sim.dt)) - sim.steps))
+            sim.bag_state()
+            sim.clearance()
+            sim.contacts()
+        return (sim.time / (time.perf_counter() - t0), sim.time / (time.process_time() - c0),
+                sim.bag.num_nodes)
+    finally:
+        sim.close()
+
+
+def batched(grasp: str, res: int, k: int, seconds: float) -> float:
+    """Bag-seconds per CPU second of K rollout copies held by `grasp` (open space)."""
+    from astrobee_sim.bags.fem_rollout import FemRollout
+    from astrobee_sim.simulation import Simulation
+    sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=res, fem_solver="fast",
+                     grasp=grasp)
+    try:
+        rng = np.random.default_rng(0)
+        wr = np.c_[rng.uniform(-0.5, 0.5, (k, 3)), rng.uniform(-0.05, 0.05, (k, 3))]
+        ro = FemRollout.from_bag(sim.bag, sim.robots[""], k, sim.dt)
+        ro.step(wr, 1)
+        steps = max(1, int(round(seconds / sim.dt)))
+        c0 = time.process_time()
+        ro.step(wr, steps)
+        return k * steps * sim.dt / max(time.process_time() - c0, 1e-9)
+    finally:
+        sim.close()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=2.0)
+    ap.add_argument("--resolution", type=int, default=400)
+    a = ap.parse_args()
+    lib: dict = {g: ([], []) for g in GRASPS}
+    bat: dict = {g: [] for g in GRASPS}
+    nodes = 0
+    for _ in range(a.rounds):
+        for g in GRASPS:
+            wall, cpu, nodes = library(g, a.resolution, a.seconds)
+            lib[g][0].append(wall)
+            lib[g][1].append(cpu)
+            bat[g].append(batched(g, a.resolution, 64, 0.1))
+    print(f"\nfast FEM bag, {nodes} nodes, PD dragging it; medians of {a.rounds} interleaved "
+          f"rounds; reference: {REF_CPU}")
+    print(f"{'grasp':<8}{'wall RTF':>10}{'CPU RTF':>10}{'vs clamp':>10}{'K=64 bag-s/CPU s':>19}")
+    ref = float(np.median(lib["clamp"][1]))
+    for g in GRASPS:
+        cpu = float(np.median(lib[g][1]))
+        print(f"{g:<8}{np.median(lib[g][0]):>9.1f}x{cpu:>9.1f}x{cpu / ref:>9.2f}x"
+              f"{np.median(bat[g]):>19.1f}")
+
+
+if __name__ == "__main__":
+    main()
