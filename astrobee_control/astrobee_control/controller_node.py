@@ -65,6 +65,7 @@ COMMON_PARAMETERS: dict[str, Any] = {
     "safety": False,                # filter the command through the CBF safety filter in-process
     "safety_margin": 0.05,          # m the filter's boundary sits outside the keep-in boxes
 }
+PREDICTED_PATH = "gnc/ctl/predicted_path"   # nav_msgs/Path of laws with predicted_path()
 PEER_CHECK_PERIOD = 0.1             # wall s between two looks at the graph and the state's age
 
 
@@ -113,6 +114,7 @@ class ControllerNode:
         self._pending: dict[str, dict[tuple[int, int], Any]] = {"pose": {}, "twist": {}}
         self._last_mob_pub = -1e9
         self._last_candidates = -1e9
+        self._last_path = -1e9
         self._carrying = False
         # peer watch (wall clock): who publishes our state, when the last state came, why lost
         self.state_pubs = PublisherWatch(n, mc.POSE if self.state_source == "truth" else mc.EKF)
@@ -132,6 +134,12 @@ class ControllerNode:
         self.pub_traj = n.create_publisher("astrobee_msgs/msg/ControlState", mc.TRAJ, 10)
         self.pub_mob = n.create_publisher("astrobee_msgs/msg/MotionState", mc.MOB_STATE, LATCHED)
         self.pub_cand = n.create_publisher("visualization_msgs/msg/MarkerArray", mc.CANDIDATES, 2)
+        # a law that predicts its own motion (predicted_path(): (K, 3) world) publishes it as a
+        # nav_msgs/Path at the candidates' rate
+        self.pub_path = None
+        if callable(getattr(self.law, "predicted_path", None)):
+            self.Path, self.PoseStamped = M("nav_msgs/msg/Path"), M("geometry_msgs/msg/PoseStamped")
+            self.pub_path = n.create_publisher("nav_msgs/msg/Path", PREDICTED_PATH, 2)
         n.create_subscription("astrobee_msgs/msg/Segment", mc.SEGMENT, self._on_segment, LATCHED)
         n.create_subscription("astrobee_msgs/msg/FlightMode", mc.FLIGHT_MODE, self._on_flight_mode, LATCHED)
         n.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
@@ -379,6 +387,7 @@ class ControllerNode:
         self._publish_command(step, stamp, self._filtered(step, state, stamp, t))
         self._publish_traj(step, stamp)
         self._publish_candidates(step, stamp, t)
+        self._publish_path(stamp, t)
         self._publish_mob(step.event, force=bool(step.event))
 
     def _filtered(self, step: Any, state: State, stamp: Any, t: float) -> Any:
@@ -427,6 +436,26 @@ class ControllerNode:
         mc.set_vec(m.accel.linear, ref.accel)
         mc.set_vec(m.accel.angular, ref.alpha)
         self.pub_traj.publish(m)
+
+    def _publish_path(self, stamp: Any, t: float) -> None:
+        """The law's predicted path (nav_msgs/Path, world frame), at most at candidates_rate."""
+        if self.pub_path is None or t - self._last_path < self.candidates_period:
+            return
+        pts = self.law.predicted_path()
+        if pts is None:
+            return
+        self._last_path = t
+        msg = self.Path()
+        msg.header.stamp, msg.header.frame_id = stamp, "world"
+        poses = []
+        for p in np.asarray(pts, float):
+            ps = self.PoseStamped()
+            ps.header.stamp, ps.header.frame_id = stamp, "world"
+            ps.pose.position.x, ps.pose.position.y, ps.pose.position.z = (float(x) for x in p)
+            ps.pose.orientation.w = 1.0
+            poses.append(ps)
+        msg.poses = poses
+        self.pub_path.publish(msg)
 
     def _publish_candidates(self, step: Any, stamp: Any, t: float) -> None:
         """The candidates a sampling law considered (grey) and the one it chose (green)."""
