@@ -1,8 +1,8 @@
 """The reduced pair model, linearised for the wrench MPC: robot + bag about the present attitude.
 
 State (25): the pair's centre of mass p, v (in the frame of the present attitude R0: the
-dynamics then do not depend on R0 and their discretisation is cached); the attitude offset delta from the present
-attitude R0 (body rotation vector) and rate w (body); the bag's swing about the grasp phi, phi'
+dynamics then do not depend on R0 and their discretisation is cached); the attitude offset
+delta from R0 (body rotation vector) and rate w (body); the bag's swing about the grasp phi, phi'
 (body rotation vector of the grasp -> bag lever); the progress s (s of the nominal's clock); the
 applied wrench a (6, body: the propulsion lag's state). Input (7): the commanded body wrench u
 and the progress rate sigma. With R0 fixed over the horizon the model is linear:

@@ -32,7 +32,8 @@ def relative_speed(controller, T=15.0):
 def test_pair_law_damps_a_planted_swing_faster_than_pd():
     pd, pair = relative_speed("pd"), relative_speed("pair")
     late = lambda r: float(np.sqrt(np.mean(r[r[:, 0] >= 12.0, 1] ** 2)))   # noqa: E731
-    early = lambda r: float(np.sqrt(np.mean(r[(r[:, 0] >= 2) & (r[:, 0] < 5), 1] ** 2)))  # noqa: E731
+    early = lambda r: float(np.sqrt(np.mean(  # noqa: E731
+        r[(r[:, 0] >= 2) & (r[:, 0] < 5), 1] ** 2)))
     assert early(pd) > 0.02 and early(pair) > 0.02          # the push did swing the bag
     # the swing decays under the pair law (by ~40% from 2-5 s to 12-15 s), not under PD (~7%)
     assert late(pair) / early(pair) < 0.8 * late(pd) / early(pd)
