@@ -44,15 +44,26 @@ def test_node_that_cannot_start_ends_the_launch_with_one_line(procs, port, tmp_p
     assert data["reason"] == data["legs"][0]["reason"]
 
 
+SIM_ONLY = """
+from astrobee_bringup.launcher import NodeSpec
+def generate_nodes(ctx):
+    return [NodeSpec("router", kind="router", command=["router", "--port", str(ctx.port)]),
+            NodeSpec("sim_node", "astrobee_sim", "sim_node", parameters=[
+                {"scenario": "node2_to_jem", "use_sim_time": True, "lockstep_timeout": 5000.0}])]
+"""
+
+
 def test_real_sim_node_with_a_bad_parameter(procs, port, tmp_path):
-    """sim_node refusing a parameter: the launch's last line names it and the parameter (a
-    value only sim_node checks: the scenario overrides, e.g. bag_mass:=-3, are refused by the
-    launcher before any process starts, see test_rejected_launch_leaves_no_run_folder)."""
-    p = procs([ASTROBEE, "launch", "cargo_transport", "lockstep_timeout:=5000", "mission:=false",
-               "record:=false", "--port", str(port), "--run-dir", str(tmp_path / "run")],
-              env=graph_env(port))
+    """sim_node refusing a parameter: the launch's last line names it and the parameter. The
+    value reaches sim_node from a launch description of the test's own: cargo_transport refuses
+    its arguments before any process starts (bag_mass:=-3, lockstep_timeout:=5000: see
+    test_rejected_launch_leaves_no_run_folder and tests/cli/test_launch_arguments.py)."""
+    description = tmp_path / "sim_only.py"
+    description.write_text(SIM_ONLY)
+    p = procs([ASTROBEE, "launch", str(description), "--port", str(port),
+               "--run-dir", str(tmp_path / "run")], env=graph_env(port))
     assert p.wait(timeout=120) == 1
-    assert "error: 'sim_node' exited with code 1: sim_node: error: parameter lockstep_timeout" \
+    assert "error: 'sim_node' exited with code 1: sim_node: error: parameter 'lockstep_timeout'" \
         in p.lines[-1], p.lines[-8:]
     _no_traceback(p.lines + p.err)
 

@@ -34,7 +34,10 @@ exits, so the bag holds the fault and the coasting robot. Without it, the contro
 """
 from __future__ import annotations
 
+import math
 import os
+import re
+import tempfile
 from pathlib import Path
 
 from astrobee.config import load_yaml
@@ -87,11 +90,63 @@ ARGUMENTS = {
 }
 
 
-def _number(ctx: LaunchContext, key: str, kind: type, what: str):
-    try:
-        return kind(ctx.arg(key))
-    except ValueError:
-        raise LaunchError(f"{key} must be {what}, got '{ctx.arg(key)}'") from None
+# the words a flag argument takes (LaunchContext.flag reads the true ones; anything else is refused)
+FLAG_WORDS = ("true", "false", "yes", "no", "1", "0", "on", "off")
+FLAGS = ("record", "gui", "mission", "demo", "video")
+SEED_MAX = 2**63 - 1                # sim_node's seed is a ROS integer parameter (int64)
+LOCKSTEP_TIMEOUT_MAX = 3600.0       # sim_node's lockstep_timeout range (astrobee_sim.sim_params)
+
+
+def _yaml_float(value: float) -> str:
+    """`value` as text a ROS parameter (YAML) reads as a float: 1e-05 -> 1.0e-05 (YAML 1.1
+    takes an exponent only after a dot and with a sign)."""
+    mantissa, e, exponent = repr(float(value)).partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return mantissa + (f"e{'' if exponent[0] in '+-' else '+'}{exponent}" if e else "")
+
+
+def check_arguments(ctx: LaunchContext) -> None:
+    """The plain launch arguments (flags, seed, lockstep_timeout, bag_dir) checked before any
+    process starts or any run folder is made: one LaunchError line naming the argument."""
+    given = ctx.arguments
+    for key in FLAGS:
+        if key in given and given[key].lower() not in FLAG_WORDS:
+            raise LaunchError(f"{key} must be true or false (yes/no, on/off, 1/0), "
+                              f"got '{given[key]}'")
+    if "seed" in given and not (re.fullmatch(r"[0-9]+", given["seed"])
+                                and int(given["seed"]) <= SEED_MAX):
+        raise LaunchError(f"seed must be an integer 0..2**63-1, got '{given['seed']}'")
+    if given.get("lockstep_timeout", "").strip():
+        try:
+            timeout = float(given["lockstep_timeout"])
+        except ValueError:
+            timeout = math.nan
+        if not (math.isfinite(timeout) and 0 < timeout <= LOCKSTEP_TIMEOUT_MAX):
+            raise LaunchError(f"lockstep_timeout must be > 0 and <= {LOCKSTEP_TIMEOUT_MAX:g} s, "
+                              f"got '{given['lockstep_timeout']}'")
+    if "bag_dir" in given and ctx.flag("record", True):
+        _check_bag_dir(ctx, given["bag_dir"])
+
+
+def _check_bag_dir(ctx: LaunchContext, bag_dir: str) -> None:
+    """The recorder makes bag_dir itself: it must not exist yet and its parent must be a
+    folder we can make a folder in (the run folder, made later, counts)."""
+    if not bag_dir.strip():
+        raise LaunchError("bag_dir must be a folder path, got ''")
+    path = Path(bag_dir)
+    if path.exists() or path.is_symlink():
+        raise LaunchError(f"bag_dir {bag_dir} already exists (the recorder makes a new folder)")
+    parent = path.absolute().parent
+    if parent == ctx.run_dir.absolute() and not parent.exists():
+        return
+    if not parent.is_dir():
+        raise LaunchError(f"bag_dir {bag_dir}: {parent} is not a folder")
+    try:                                # the one way to know: make a folder there and remove it
+        os.rmdir(tempfile.mkdtemp(prefix=".bag_dir-check-", dir=parent))
+    except OSError as exc:
+        raise LaunchError(f"bag_dir {bag_dir}: cannot make a folder in {parent} "
+                          f"({exc.strerror or exc})") from None
 
 
 def scenario_overrides(ctx: LaunchContext) -> Overrides:
@@ -103,6 +158,7 @@ def scenario_overrides(ctx: LaunchContext) -> Overrides:
 
 
 def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
+    check_arguments(ctx)
     scenario = ctx.arg("scenario", "node2_to_jem")
     controller = ctx.arg("controller", "")      # '' : each scenario's own (pd if it names none)
     known = registry.names()
@@ -155,14 +211,10 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
             flatten_params(load_yaml(ctx.config_dir / "controllers.yaml").get(kind) or {}))
     common = {"scenario": scenario, "use_sim_time": True}
     sim_params = {**common, "clock_mode": clock, "gui": gui}
-    if ctx.arg("lockstep_timeout"):
-        sim_params["lockstep_timeout"] = _number(ctx, "lockstep_timeout", float, "a number of seconds")
-        if not sim_params["lockstep_timeout"] > 0:
-            raise LaunchError("lockstep_timeout must be > 0")
+    if ctx.arg("lockstep_timeout").strip():     # checked by check_arguments
+        sim_params["lockstep_timeout"] = _yaml_float(float(ctx.arg("lockstep_timeout")))
     if ctx.arg("seed"):
-        sim_params["seed"] = _number(ctx, "seed", int, "a non-negative integer")
-        if sim_params["seed"] < 0:
-            raise LaunchError("seed must be a non-negative integer")
+        sim_params["seed"] = int(ctx.arg("seed"))
     sim_params.update(overrides.as_parameters())   # the sim builds the scenario with them
     mission = ctx.flag("mission", True)
     safety = SAFETY_MODES.get(ctx.arg("safety", SAFETY_DEFAULT).strip().lower())
