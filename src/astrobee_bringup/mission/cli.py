@@ -99,7 +99,15 @@ def client_last(client: MissionClient, name: str) -> LegResult:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`astrobee mission`: the arguments, then run_mission (exit status as it says)."""
+    """`astrobee mission`: the arguments, then run_mission (exit status as it says); stopped
+    (SIGINT) while it starts, before run_mission took the signal over: 130, no traceback."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     own, _, ros = (argv[:argv.index("--ros-args")], None, argv[argv.index("--ros-args"):]) \
         if "--ros-args" in argv else (argv, None, [])
