@@ -1,9 +1,10 @@
 """A leg's TaskSamples from its messages, live (the mission) or read back from a recording
 (astrobee_lab.recorded): one builder, so both judge the same samples the same way.
 
-One sample per truth pose stamp of the first robot (sim ns), with every robot's truth pose and
-twist of that stamp (/loc/truth/pose, /loc/truth/twist), the reference of the same stamp
-(/gnc/ctl/traj, when the command of that stamp is not idle), contacts and clearance
+One sample per truth pose stamp of the first robot (sim ns) for which every robot's truth pose
+and twist are in (/loc/truth/pose, /loc/truth/twist; a stamp with a message lost is passed
+over), with the reference of the same stamp (/gnc/ctl/traj, when the command of that stamp is
+not idle), contacts and clearance
 (/sim/contacts), the bag's speed relative to the first robot (/sim/bag/state) and the faults
 raised up to it (/sim/fault). Messages are duck-typed (attributes as in astrobee_msgs): the
 core needs no transport.
@@ -109,9 +110,12 @@ class LegSamples:
 
     def samples(self, start_ns: int | None = None, end_ns: int | None = None
                 ) -> Iterator[TaskSample]:
-        """Every sample with start_ns <= t <= end_ns, in time order."""
+        """Every complete sample (every robot's pose and twist in) with start_ns <= t <=
+        end_ns, in time order: a stamp whose twist was lost (a dropped message) is passed
+        over, as the live feed passes it."""
         for t in self.stamps(start_ns, end_ns):
-            yield self.sample(t)
+            if self.complete(t):
+                yield self.sample(t)
 
     def new_samples(self, start_ns: int) -> Iterator[TaskSample]:
         """Live: the samples from start_ns on whose poses and twists are all in and that come

@@ -392,6 +392,8 @@ class Flight:
             velocities={n: (self._truth[n][2], self._truth[n][3]) for n in self.names},
             reference={n: self._steps[n].reference.position for n in self.names
                        if self._steps[n].control_mode != 0},
+            reference_attitude={n: self._steps[n].reference.orientation for n in self.names
+                                if self._steps[n].control_mode != 0},
             contacts=len(contacts),
             contact_bodies=tuple(sorted({f"{c.body_a}-{c.body_b}" for c in contacts})),
             touching=tuple(sorted({c.body_a for c in contacts})),

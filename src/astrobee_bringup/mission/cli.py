@@ -14,6 +14,7 @@ from astrobee.task import SETTLE_BUDGET
 from astrobee_bringup import summary as sm
 
 from .client import MissionClient
+from .leg import fly_leg
 from .progress import Progress
 from .result import Interrupted, LegResult, finish_leg, write_outputs
 
@@ -55,8 +56,8 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
     try:
         for i, name in enumerate(scenarios):
             try:
-                res = client.fly(name, reset=i > 0, progress=progress, wall_timeout=wall_timeout,
-                                 ready_timeout=ready_timeout, settle_budget=settle_budget)
+                res = fly_leg(client, name, i > 0, progress, wall_timeout, ready_timeout,
+                              settle_budget)
             except Interrupted:
                 legs.append(getattr(client, "interrupted_result", None) or client_last(client, name))
                 all_series.append(client.leg_series())

@@ -9,19 +9,14 @@ import numpy as np
 
 from astrobee import msgconv as mc
 from astrobee.leg_samples import LegSamples
-from astrobee.task import SETTLE_BUDGET
 from astrobee_bringup import summary as sm
 from astrobee_bringup.peers import PeerLost, PeerWatch
 
-from .progress import Progress
 from .resets import SimResets
-from .result import Interrupted, LegResult, MissionError
-from .watch import RobotWatch
+from .result import Interrupted, MissionError
+from .watch import FAULT_WATCH_SIM, FAULT_WATCH_WALL, RobotWatch
 
 PEERS = ("sim_node", "planner_node")     # nodes every leg needs (plus its controllers)
-# After a fault (the sim's propulsion watchdog: the controller is gone) the leg ends once the
-# robot has been watched coasting this long (sim s), or this many wall s (a slow lockstep sim).
-FAULT_WATCH_SIM, FAULT_WATCH_WALL = 0.5, 3.0
 
 
 class MissionClient(SimResets):
@@ -183,13 +178,3 @@ class MissionClient(SimResets):
             mc.robot_topic(w.name, mc.MOB_STATE)) if e.node_fqn != me})
         self.peers = PeerWatch(self.node, nodes=[*PEERS, *ctls])
 
-    # ---- one leg ------------------------------------------------------------------------
-    def fly(self, scenario_name: str, reset: bool, progress: Progress,
-            wall_timeout: float = 600.0, ready_timeout: float = 60.0,
-            settle_budget: float = SETTLE_BUDGET) -> LegResult:
-        """Fly one scenario to its goal; the result says how it went (never raises MissionError)."""
-        from .leg import fly_leg
-        return fly_leg(self, scenario_name, reset, progress, wall_timeout, ready_timeout,
-                       settle_budget)
-
-    # ---- one leg ------------------------------------------------------------------------

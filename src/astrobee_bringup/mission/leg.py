@@ -17,11 +17,10 @@ from astrobee import rotations as rot
 from astrobee.leg_samples import LegSamples
 from astrobee.task import Goal, Task, TaskMonitor
 
-from .client import FAULT_WATCH_SIM, FAULT_WATCH_WALL
 from .planning import HANDOVER_LEAD, plan_formation, plan_one
 from .progress import Progress
 from .result import Interrupted, LegResult, MissionError, finish_leg
-from .watch import IDLE, STOPPED, RobotWatch
+from .watch import FAULT_WATCH_SIM, FAULT_WATCH_WALL, IDLE, STOPPED, RobotWatch
 
 NAMES = mc.MotionState.NAMES
 MAX_RESUME_STEPS = 100_000     # sim_node's bound on one /sim/control request

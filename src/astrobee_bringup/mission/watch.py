@@ -13,6 +13,9 @@ from astrobee_bringup import summary as sm
 
 IDLE, STOPPED, CONTROLLING = (mc.MotionState.IDLE, mc.MotionState.STOPPED,
                               mc.MotionState.CONTROLLING)
+# After a fault (the sim's propulsion watchdog: the controller is gone) the leg ends once the
+# robot has been watched coasting this long (sim s), or this many wall s (a slow lockstep sim).
+FAULT_WATCH_SIM, FAULT_WATCH_WALL = 0.5, 3.0
 
 
 class RobotWatch:
@@ -34,9 +37,10 @@ class RobotWatch:
         self.faults: list[tuple[float, str]] = []       # (sim time, text) during this flight
         self.fault_active: tuple[float, str] | None = None
         self.log = node.get_logger()
-        node.create_subscription("geometry_msgs/msg/PoseStamped", pre + mc.POSE, self._on_pose, 10)
+        # the truth the Task judges: a deep queue (a loaded mission must not drop samples)
+        node.create_subscription("geometry_msgs/msg/PoseStamped", pre + mc.POSE, self._on_pose, 100)
         node.create_subscription("geometry_msgs/msg/TwistStamped", pre + mc.TWIST,
-                                 self._on_twist, 10)
+                                 self._on_twist, 100)
         self.cmd_ns = -1                # stamp (ns) of the last command (any control mode)
         node.create_subscription("astrobee_msgs/msg/FamCommand", pre + mc.COMMAND,
                                  self._on_command, 10)
