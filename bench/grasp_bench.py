@@ -5,7 +5,7 @@ library loop: physics 350 Hz, one command per 16 ms tick, bag state + clearance 
 tick), by the wall clock and per CPU second, rounds interleaved (medians); then batched
 rollouts (K=64 copies, fem_rollout) per grasp in bag-seconds per CPU second. References: the
 clamp in the same run, and docs/benchmarks.md's fast solver at 412 nodes (fem_fast_bench.py:
-9.6x per CPU s quiet; ~5.7x per CPU s in the issue's run).
+9.6x per CPU s quiet; ~5.7x per CPU s in a loaded run).
 
     .venv/bin/python bench/grasp_bench.py [--rounds 3] [--seconds 2]
 """
@@ -19,7 +19,7 @@ import numpy as np
 from sim_rtf import goal_at, pd_wrench
 
 GRASPS = ("strap", "hinge", "clamp")
-REF_CPU = "9.6x per CPU s (fem_fast_bench, quiet); ~5.7x (issue 24's run)"
+REF_CPU = "9.6x per CPU s (fem_fast_bench, quiet); ~5.7x in a loaded run"
 
 
 def library(grasp: str, res: int, seconds: float) -> tuple[float, float, int]:
