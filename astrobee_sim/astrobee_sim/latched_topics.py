@@ -3,8 +3,8 @@
 /sim/scenario (ScenarioInfo: the scenario as built, for the controller and the mission),
 each robot's <ns>/mob/flight_mode, /sim/realism (the knobs, the pulse schedule and the pulses
 applied), and for any viewer /sim/markers (keep-in boxes, module labels), /sim/robot_markers
-(each robot's boxes in its body frame), /robot_description (the Astrobee URDF) and /tf_static
-(the URDF's fixed joint, the gripper on the distal link; the moving joints go on /tf per tick).
+(each robot's boxes in its body frame) and /robot_description (the Astrobee URDF; its links'
+transforms go on /tf with each tick's state).
 """
 from __future__ import annotations
 
@@ -17,8 +17,6 @@ from astrobee import msgconv as mc
 from astrobee.scenario import Scenario
 
 from . import markers
-from .robot import GRIPPER_MOUNT
-from .state_publisher import frame
 from .world import module_colour
 
 ROBOT_MARKERS = "/sim/robot_markers"   # latched MarkerArray: each robot's boxes in its body frame
@@ -26,8 +24,7 @@ SIM_REALISM = "/sim/realism"    # latched std_msgs/String: the realism in effect
 MESSAGES = {
     "markers": "visualization_msgs/msg/MarkerArray", "marker": "visualization_msgs/msg/Marker",
     "mode": "astrobee_msgs/msg/FlightMode", "scenario": "astrobee_msgs/msg/ScenarioInfo",
-    "pose_": "geometry_msgs/msg/Pose", "string": "std_msgs/msg/String",
-    "tf": "tf2_msgs/msg/TFMessage", "tfs": "geometry_msgs/msg/TransformStamped"}
+    "pose_": "geometry_msgs/msg/Pose", "string": "std_msgs/msg/String"}
 
 
 class LatchedTopics:
@@ -46,7 +43,6 @@ class LatchedTopics:
         self.pub_robot_description = n.create_publisher(MESSAGES["string"], "/robot_description",
                                                         LATCHED)
         self.pub_robot_markers = n.create_publisher(MESSAGES["markers"], ROBOT_MARKERS, LATCHED)
-        self.pub_tf_static = n.create_publisher(MESSAGES["tf"], "/tf_static", LATCHED)
         self.pub_mode: dict[str, Any] = {}
         self.realism_applied = -1      # pulses in the last /sim/realism
 
@@ -126,8 +122,7 @@ class LatchedTopics:
         self.realism_applied = len(applied)
 
     def publish_markers(self) -> None:
-        """/sim/markers (keep-in boxes, module labels), /sim/robot_markers, /robot_description,
-        /tf_static."""
+        """/sim/markers (keep-in boxes, module labels), /sim/robot_markers, /robot_description."""
         M = self.M
         arr = M["markers"]()
         out = []
@@ -161,15 +156,3 @@ class LatchedTopics:
         desc = M["string"]()
         desc.data = markers.robot_description()
         self.pub_robot_description.publish(desc)
-        static = M["tf"]()
-        parent, child, xyz = GRIPPER_MOUNT
-        tfs = []
-        for name in self.host.names:
-            t = M["tfs"]()
-            mc.set_stamp_ns(t.header.stamp, self.host.now_ns())
-            t.header.frame_id, t.child_frame_id = frame(name, parent), frame(name, child)
-            mc.set_vec(t.transform.translation, xyz)
-            t.transform.rotation.w = 1.0
-            tfs.append(t)
-        static.transforms = tfs
-        self.pub_tf_static.publish(static)

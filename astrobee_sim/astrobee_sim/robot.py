@@ -24,12 +24,11 @@ DISTAL_LEN = 0.06
 GRIPPER_LEN = 0.08
 ARM_MASSES = {"proximal": 0.30, "distal": 0.20, "gripper": 0.15, "finger": 0.02}
 MAX_ABS_WRENCH = 100.0   # N or N m: anything larger is a bad command, not a saturation
-# the arm's moving joints, and (parent link, child link) of each: what /tf carries per tick
+# the arm's moving joints (their positions: Robot.arm_joints), and (parent link, child link) of
+# every arm joint, the fixed gripper mount included: what /tf carries per tick (arm_transforms)
 ARM_JOINTS = ("arm_proximal_joint", "arm_distal_joint", "finger_left_joint", "finger_right_joint")
-ARM_LINKS = (("body", "arm_proximal"), ("arm_proximal", "arm_distal"), ("gripper", "finger_left"),
-             ("gripper", "finger_right"))
-# the fixed joint (parent, child, translation): /tf_static
-GRIPPER_MOUNT = ("arm_distal", "gripper", (DISTAL_LEN, 0.0, 0.0))
+ARM_LINKS = (("body", "arm_proximal"), ("arm_proximal", "arm_distal"), ("arm_distal", "gripper"),
+             ("gripper", "finger_left"), ("gripper", "finger_right"))
 
 
 def qrot_floats(q, v) -> tuple[float, float, float]:
@@ -46,8 +45,8 @@ _MOUNT: list = []
 
 
 def arm_transforms(joints) -> list[tuple[float, ...]]:
-    """The transforms (x, y, z, qx, qy, qz, qw) parent -> child of the arm's moving joints
-    (ARM_LINKS order) at joint positions (proximal, distal in rad; left, right finger in m),
+    """The transforms (x, y, z, qx, qy, qz, qw) parent -> child of the arm's joints (ARM_LINKS
+    order) at the moving joints' positions (proximal, distal in rad; left, right finger in m),
     from the URDF's joint origins and axes as robot_state_publisher computes them."""
     if not _MOUNT:
         arm = config.astrobee()["arm"]
@@ -60,6 +59,7 @@ def arm_transforms(joints) -> list[tuple[float, ...]]:
     fx = GRIPPER_LEN * 0.6
     return [(mx, my, mz, ax * cy - az * sy, aw * sy + ay * cy, ax * sy + az * cy, aw * cy - ay * sy),
             (PROXIMAL_LEN, 0.0, 0.0, 0.0, 0.0, sz, cz),
+            (DISTAL_LEN, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
             (fx, left, 0.0, 0.0, 0.0, 0.0, 1.0),
             (fx, -right, 0.0, 0.0, 0.0, 0.0, 1.0)]
 

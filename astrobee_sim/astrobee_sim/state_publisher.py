@@ -1,6 +1,6 @@
 """sim_node's per-tick state: /clock, each robot's truth pose and twist, its EkfState and
-propulsion fault, /tf (each robot's body and its arm's moving joints, as robot_state_publisher
-would from the joint states, and the bag), the cargo bag's state, mesh and surface marker, and
+propulsion fault, /tf (each robot's body and its arm's links, as robot_state_publisher would
+from the joint states, and the bag), the cargo bag's state, mesh and surface marker, and
 /sim/contacts.
 
 The messages of a tick keep their layout from tick to tick, so each goes out as a CDR template

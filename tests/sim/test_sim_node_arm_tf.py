@@ -1,11 +1,11 @@
-"""The arm on /tf: the transforms sim_node publishes for the URDF's moving joints (and the fixed
-gripper joint on /tf_static), chained from the body pose, put every arm link where pybullet has
-it, so a viewer drawing /robot_description from TF draws the whole robot."""
+"""The arm on /tf: the transforms sim_node publishes for the URDF's arm joints, chained from the
+body pose, put every arm link where pybullet has it, so a viewer drawing /robot_description from
+TF draws the whole robot."""
 import numpy as np
 import pytest
 
 from astrobee import rotations as rot
-from astrobee_sim.robot import ARM_LINKS, GRIPPER_MOUNT, arm_transforms
+from astrobee_sim.robot import ARM_LINKS, arm_transforms
 from astrobee_sim.simulation import Simulation
 
 roszen = pytest.importorskip("roszen")
@@ -21,12 +21,7 @@ def _link_poses(sim, name=""):
     """World pose of every arm link from the body pose and the published transforms."""
     r = sim.robots[name]
     poses = {"body": r.pose()}
-    trs = arm_transforms(sim.arm_joints(name))
-    for (parent, child), tr in zip(ARM_LINKS[:2], trs[:2]):
-        poses[child] = _compose(poses[parent], (np.array(tr[:3]), np.array(tr[3:])))
-    parent, child, xyz = GRIPPER_MOUNT
-    poses[child] = _compose(poses[parent], (np.array(xyz), np.array([0.0, 0.0, 0.0, 1.0])))
-    for (parent, child), tr in zip(ARM_LINKS[2:], trs[2:]):
+    for (parent, child), tr in zip(ARM_LINKS, arm_transforms(sim.arm_joints(name))):
         poses[child] = _compose(poses[parent], (np.array(tr[:3]), np.array(tr[3:])))
     return poses
 
@@ -104,13 +99,10 @@ def test_sim_node_publishes_the_arm_frames_of_every_robot(backend):
     tf = codec.msg_support("tf2_msgs/msg/TFMessage").deserialize
     last = [tf(d) for t, d in node.out if t == "/tf"][-1]
     pairs = {(t.header.frame_id, t.child_frame_id) for t in last.transforms}
-    static = [tf(d) for t, d in node.out if t == "/tf_static"][-1]
-    static_pairs = {(t.header.frame_id, t.child_frame_id) for t in static.transforms}
     assert len(names) == 2
     for name in names:
         pre = f"{name}/" if name else ""
         assert ("world", f"{pre}body") in pairs
         assert {(pre + a, pre + b) for a, b in ARM_LINKS} <= pairs
-        assert (pre + GRIPPER_MOUNT[0], pre + GRIPPER_MOUNT[1]) in static_pairs
     assert ("world", "bag") in pairs
     assert len(last.transforms) == len(names) * (1 + len(ARM_LINKS)) + 1

@@ -279,7 +279,7 @@ def _latest_scenario(g):
 
 
 def test_bad_reset_is_refused_and_the_old_world_runs_on(graph):
-    """Issue 19 items 2 and 5: a bad /sim/reset (negative seed, a path for a name, an unknown
+    """A bad /sim/reset (negative seed, a path for a name, an unknown
     scenario) gets success false and the sim keeps publishing the world it had."""
     import yaml
 
