@@ -452,6 +452,8 @@ def main(argv: list[str]) -> int:
             res = render(a.recording, out, log_window=window, title=title, **opts)
     except RenderError as exc:
         return _fail(str(exc))
+    except (ValueError, ArithmeticError) as exc:  # a damaged record that decoded to nonsense
+        return _fail(f"cannot render: {type(exc).__name__}: {exc}")
     except KeyboardInterrupt:
         return _fail("interrupted")
     print(f"{res.path}: {res.frames} frames {res.size[0]}x{res.size[1]}, "
@@ -491,5 +493,6 @@ def _leg_window(bag: Path, leg: int) -> tuple[tuple[float, float], str]:
 
 
 def _fail(msg: str) -> int:
-    print(f"astrobee bag render: {msg}", file=sys.stderr)
+    one_line = " ".join(msg.split())        # a parser's message may span lines (YAML marks)
+    print(f"astrobee bag render: {one_line}", file=sys.stderr)
     return 1

@@ -143,8 +143,14 @@ def read_recording(bag_dir: str | os.PathLike,
 
     try:
         reader = Reader(bag_dir)
-    except RecordingError as exc:
+        return _read(reader, bag_dir, log_window)
+    except RecordingError as exc:           # missing, unreadable, or a damaged chunk
         raise RenderError(str(exc)) from None
+
+
+def _read(reader: Any, bag_dir: str | os.PathLike,
+          log_window: tuple[float, float] | None) -> Recording:
+    """read_recording's work on the opened recording `reader`."""
     topics = reader.topics
     pose_topics = {n: n[: -len("/loc/truth/pose")].strip("/") for n, ty in topics.items()
                    if n.endswith("/loc/truth/pose") and ty.endswith("PoseStamped")}

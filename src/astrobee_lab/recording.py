@@ -55,19 +55,29 @@ class Recording:
                  log_window: tuple[float, float] | None = None) -> Iterator[Recorded]:
         """Decoded messages of `topics` (those recorded) in recording order; with `log_window`
         (wall-clock s) only those received in it. A record that does not decode is skipped
-        (one bad record must not lose a plot or a video)."""
+        (one bad record must not lose a plot or a video); a damaged chunk of the MCAP ends the
+        reading with RecordingError (one line)."""
         from roszen import typestore
+        from roszen.bag.metadata import BagError
         wanted = [t for t in dict.fromkeys(topics) if t in self.topics]
         if not wanted:
             return
         decode = {t: typestore.deserializer(self.topics[t]) for t in wanted}
         lo, hi = (log_window[0] * 1e9, log_window[1] * 1e9) if log_window else (-1.0, math.inf)
-        for m in self._reader.messages(wanted):
+        try:
+            yield from self._decoded(self._reader.messages(wanted), decode, lo, hi)
+        except (BagError, OSError) as exc:
+            raise RecordingError(str(exc)) from None
+
+    @staticmethod
+    def _decoded(records: Iterable[Any], decode: dict[str, Callable[[bytes], Any]],
+                 lo: float, hi: float) -> Iterator[Recorded]:
+        for m in records:
             if not lo <= m.publish_time_ns <= hi:  # wall receive time (log time may be sim time)
                 continue
             try:
                 msg = decode[m.topic.name](m.data)
-            except Exception:  # noqa: BLE001 - see the docstring
+            except Exception:  # noqa: BLE001 - see messages' docstring
                 continue
             yield Recorded(m.topic.name, m.topic.type, int(m.publish_time_ns),
                            int(m.log_time_ns), msg)

@@ -40,9 +40,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from astrobee.overrides import OVERRIDE_KEYS, parse_overrides
+from roszen import yamltext
 
 TOP_KEYS = {"name", "description", "controllers", "base", "seeds", "time_limit", "metrics",
             "blocks", "grid", "random", "set", "notes", "labels"}
@@ -375,17 +375,14 @@ def load_study(path: str | Path) -> Study:
     """Read and expand a study file (StudyError, one line, for anything wrong in it)."""
     p = Path(path)
     where = f"study {p}"
-    try:
-        data = yaml.safe_load(p.read_text())
+    try:    # roszen.yamltext: a bad or too deeply nested document is one line, no RecursionError
+        data = yamltext.load(p.read_text(), where)
     except FileNotFoundError:
         raise StudyError(f"{where}: no such file") from None
     except OSError as exc:
         raise StudyError(f"{where}: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" (line {mark.line + 1})" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or "not valid YAML"
-        raise StudyError(f"{where}: not valid YAML{line}: {problem}") from None
+    except yamltext.YamlError as exc:
+        raise StudyError(str(exc)) from None
     return parse_study(data, p.stem, where, p)
 
 

@@ -122,6 +122,8 @@ def group_alive(pgid: int) -> list[int]:
 
 BAD = [
     ("not: [valid", "not valid YAML"),
+    ("[" * 3000 + "]" * 3000, "YAML nested deeper than 100 levels"),   # was a RecursionError
+    ("{a: " * 3000 + "1" + "}" * 3000, "YAML nested deeper than 100 levels"),
     ({"name": "x", "grid": {"controller": ["pd"]}, "colour": 1}, "unknown key 'colour'"),
     ({"grid": {"controller": ["lqr"]}}, "unknown controller 'lqr'"),
     ({"controllers": {"a": {"controller": "lqr"}}, "grid": {"controller": ["a"]}},
