@@ -46,7 +46,8 @@ from roszen.parameters import read_only, runtime
 
 from . import mass as mp
 from .law import ControlLaw, LawFactory
-from .node_io import CarriedBag, SafetyDiagnostics, bag_descriptors, ekf_state
+from .node_io import (CarriedBag, FlightModeParameter, SafetyDiagnostics, bag_descriptors,
+                      ekf_state)
 from .pd import State
 from .reference import from_control_states
 
@@ -108,6 +109,7 @@ class ControllerNode:
         law_params = {k: values[k] for k in (parameters or {})}
         self.law: ControlLaw = make_law(mode, mp.robot(), law_params)
         self.safety = self._make_safety(values["safety"], values["safety_margin"])
+        self.modes = FlightModeParameter(n, lambda m: self.law.set_flight_mode(m))
         self._last_stamp: float | None = None
         self._last_state: State | None = None
         self._last_segment_key: tuple[int, int] | None = None
@@ -274,7 +276,7 @@ class ControllerNode:
                 return  # latched redelivery of the segment we already follow
             traj = from_control_states(msg.segment)
             if msg.flight_mode:
-                self.law.set_flight_mode(flight_modes.get(msg.flight_mode))
+                self.modes.in_effect(flight_modes.get(msg.flight_mode))
         except (ValueError, AttributeError, TypeError) as exc:
             self.log.error(f"segment rejected: {exc}")
             self._publish_mob(f"segment rejected: {exc}", force=True)
@@ -288,8 +290,8 @@ class ControllerNode:
 
     def _on_flight_mode(self, msg: Any) -> None:
         try:
-            self.law.set_flight_mode(flight_modes.get(msg.name))
-            self.log.info(f"flight mode {msg.name}")
+            if self.modes.on_announced(msg.name):   # the flight_mode parameter shows it
+                self.log.info(f"flight mode {msg.name}")
         except flight_modes.UnknownFlightMode as exc:
             self.log.error(str(exc))
 

@@ -8,10 +8,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from astrobee import flight_modes
 from astrobee import msgconv as mc
 from astrobee import rotations as rot
 from astrobee.overrides import MASS_RANGE
-from roszen.parameters import runtime
+from roszen.parameters import Parameter, runtime
 
 from .law import BagObservation
 from .pd import State
@@ -58,6 +59,34 @@ def ekf_state(msg: Any) -> State:
         raise ValueError("non-finite state")
     state.orientation = rot.normalize(state.orientation)
     return state
+
+
+class FlightModeParameter:
+    """The node's flight_mode parameter shows the mode in effect. A mode announced on
+    <ns>/mob/flight_mode is taken when it differs from the last one announced (the latched
+    sample again, or the sim saying the same mode, does not undo a `param set`); a mode taken
+    from elsewhere (a segment's) goes through in_effect too."""
+
+    def __init__(self, node: Any, apply: Callable[[Any], None]) -> None:
+        self.node, self.apply = node, apply
+        self.announced: str | None = None       # the last mode /mob/flight_mode said
+
+    def on_announced(self, name: str) -> bool:
+        """A /mob/flight_mode sample: True when it changed the mode (UnknownFlightMode raises)."""
+        if name == self.announced:
+            return False
+        mode = flight_modes.get(name)
+        self.announced = name
+        self.in_effect(mode)
+        return True
+
+    def in_effect(self, mode: Any) -> None:
+        """Fly `mode`; the parameter is set to its name (its on_change applies it) or, when it
+        shows it already, the mode applied directly."""
+        if self.node.get_parameter("flight_mode").value != mode.name and \
+                self.node.set_parameter(Parameter("flight_mode", value=mode.name)).successful:
+            return
+        self.apply(mode)
 
 
 class CarriedBag:
