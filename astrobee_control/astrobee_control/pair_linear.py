@@ -1,13 +1,15 @@
 """The reduced pair model, linearised for the wrench MPC: robot + bag about the present attitude.
 
-State (25): the pair's centre of mass p, v (in the frame of the present attitude R0: the
-dynamics then do not depend on R0 and their discretisation is cached); the attitude offset
+State (25): the pair's centre as held, p = robot + R c (c = m_b / M times the bag's rest
+offset), and v, in the frame of the present attitude R0 (the dynamics then do not depend on
+R0 and their discretisation is cached); it is the centre of mass when the bag hangs at rest and
+moves with the swing's reaction, M v' = a_F + m_b [l]x phi'' (the pair law tracks it too); the attitude offset
 delta from R0 (body rotation vector) and rate w (body); the bag's swing about the grasp phi, phi'
 (body rotation vector of the grasp -> bag lever); the progress s (s of the nominal's clock); the
 applied wrench a (6, body: the propulsion lag's state). Input (7): the commanded body wrench u
 and the progress rate sigma. With R0 fixed over the horizon the model is linear:
 
-    M v'  = a_F                         I w' = a_T - lever x a_F
+    M v'  = a_F + m_b [l]x phi''         I w' = a_T - lever x a_F
     J phi'' = -K phi - C phi' - (m_b / M) l x a_F          s' = sigma
     a' = (u - a) / lag                  (lag 0: a = u)
 
@@ -80,6 +82,10 @@ def continuous(fig: PairFigures) -> tuple[np.ndarray, np.ndarray]:
     src[W, tcols] = torque_to_w
     src[PHID, cols] = force_to["phi"]
     B[S, 6] = 1.0
+    if mb > 0:      # p is the rigid centre (robot + R c): it moves with the swing's reaction
+        gl = (mb / M) * skew(l)
+        A[V, :] += gl @ A[PHID, :]
+        B[V, :] += gl @ B[PHID, :]
     return A, B
 
 
@@ -101,9 +107,8 @@ def positions(fig: PairFigures, R0: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     Cr = np.zeros((3, NX))
     Cr[:, P] = R0
     Cr[:, D] = R0 @ skew(c)
-    Cr[:, PHI] = (mb / M) * R0 @ skew(l)
     Cb = np.zeros((3, NX))
     Cb[:, P] = R0
     Cb[:, D] = -R0 @ skew(d - c)
-    Cb[:, PHI] = -((M - mb) / M) * R0 @ skew(l)
+    Cb[:, PHI] = -R0 @ skew(l)
     return Cr, -R0 @ c, Cb, R0 @ (d - c)

@@ -136,10 +136,10 @@ class WrenchMpcLaw(PairLaw):
         w = np.asarray(state.omega, float)
         x0[pl.W] = w
         if ctl.bag is not None and pair.bag_mass > 0:
-            gm = pair.bag_mass / pair.mass
             pb, vb = np.asarray(ctl.bag.position, float), np.asarray(ctl.bag.velocity, float)
-            x0[pl.P] = p + gm * (pb - p)
-            x0[pl.V] = v + gm * (vb - v)
+            arm = R @ pair.centre                   # the centre as held (the pair law's)
+            x0[pl.P] = p + arm
+            x0[pl.V] = v + np.cross(R @ w, arm)
             l0 = pair.offset - g
             r = R.T @ (pb - p) - g
             rd = R.T @ (vb - v) - np.cross(w, r + g)
