@@ -87,10 +87,12 @@ def make_controller(controller: str | Any, flight_mode, params: dict | None = No
     from astrobee_control import mass as mp
     from astrobee_control import registry
     if isinstance(controller, str):
-        if controller not in registry.names():
+        try:
+            law = registry.get(controller)
+        except registry.UnknownController:
             raise ValueError(f"controller must be {registry.choices_text()} or a ControlLaw, "
-                             f"got {controller!r}")
-        return registry.get(controller).make(flight_mode, mp.robot(), params)
+                             f"got {controller!r}") from None
+        return law.make(flight_mode, mp.robot(), params)
     if callable(controller) and not hasattr(controller, "update"):
         return controller(flight_mode, mp.robot(), dict(params or {}))
     return controller

@@ -107,7 +107,11 @@ def test_step_action_adds_to_or_replaces_the_law_wrench(make_hop):
 
 def test_bad_arguments_are_one_line_errors(make_hop):
     from astrobee.scenario import Scenario
-    with pytest.raises(ValueError, match="controller must be mpc or pd"):
+    import re
+
+    from astrobee_control import registry
+    with pytest.raises(ValueError, match=f"controller must be {re.escape(registry.choices_text())} "
+                                         "or a ControlLaw, got 'lqr'"):
         Flight(make_hop(None), controller="lqr").reset()
     with pytest.raises(ValueError, match="one robot, or two"):
         Flight(Scenario.load("node2_to_jem", robots=["", "a", "b"]))

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from astrobee_control import registry
 from astrobee_lab import study_cli
 from astrobee_lab.study import read_table, run_study, table_without_costs
 from astrobee_lab.study_spec import StudyError, load_study
@@ -127,7 +128,7 @@ BAD = [
     ({"name": "x", "grid": {"controller": ["pd"]}, "colour": 1}, "unknown key 'colour'"),
     ({"grid": {"controller": ["lqr"]}}, "unknown controller 'lqr'"),
     ({"controllers": {"a": {"controller": "lqr"}}, "grid": {"controller": ["a"]}},
-     "controller must be mpc or pd"),
+     f"controller must be {registry.choices_text()}, got 'lqr'"),
     ({"base": {"scenario": "no_such_place"}, "grid": {"controller": ["pd"]}}, "no_such_place"),
     ({"base": {"realism": {"ekf_position_noise": -1}}, "grid": {"controller": ["pd"]}},
      "ekf_position_noise"),
