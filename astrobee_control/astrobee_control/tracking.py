@@ -6,6 +6,9 @@ MotionState values follow NASA ff_msgs/MotionState. Life cycle:
     any  --segment-->  CONTROLLING (track it)  --end of segment-->  STOPPING (hold final pose
     until within tolerance and at rest, or settle_time)  -->  STOPPED
     any  --stop request-->  STOPPING (hold the pose where the stop came)  --at rest-->  STOPPED
+STOPPED is this law's own report (read from the state it is fed) and it keeps holding there;
+it ends no leg: the mission and Flight end a leg when astrobee.task says so (at rest at the
+goal on truth for 2 s, or the time budget out), one judge reading one source.
 """
 from __future__ import annotations
 
