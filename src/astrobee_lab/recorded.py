@@ -61,8 +61,8 @@ def read_leg(bag_dir: str | os.PathLike, namespace: str = "") -> RecordedLeg:
     if not controlling:
         return RecordedLeg(b, None, None)
     start, duration = controlling[0], None
-    if segments and segments[-1].segment:
-        whens = [mc.stamp_ns(s.when) for s in segments[-1].segment]
+    if segments and segments[0].segment:        # the first leg's (as the first CONTROLLING)
+        whens = [mc.stamp_ns(s.when) for s in segments[0].segment]
         start = max(start, whens[0])
         duration = (whens[-1] - whens[0]) * 1e-9
     return RecordedLeg(b, start, duration)
