@@ -320,9 +320,22 @@ def echo_cmd(args) -> int:
             sys.stdout.flush()
             count[0] += 1
 
-        node.create_subscription(type_name, topic, on_msg, qos, raw=args.raw)
-        done = spin_until(node, lambda: bool(error) or (args.once and count[0] > 0),
-                          args.timeout)
+        sub = [node.create_subscription(type_name, topic, on_msg, qos, raw=args.raw)]
+        # no publisher seen yet: the QoS was chosen blind (volatile); once discovery shows the
+        # publishers, adapt to them, so a latched publisher's history is asked for (a one-shot
+        # latched sample would otherwise never arrive, while the next run got it at once)
+        blind = [not node.get_publishers_info_by_topic(topic)
+                 and not (args.qos_profile or args.qos_durability)]
+
+        def finished() -> bool:
+            if blind[0] and node.get_publishers_info_by_topic(topic):
+                blind[0] = False
+                seen = qos_from_args(args, adapted_qos(node, topic))
+                if seen.durability != sub[0].qos_profile.durability:
+                    node.destroy_subscription(sub[0])
+                    sub[0] = node.create_subscription(type_name, topic, on_msg, seen, raw=args.raw)
+            return bool(error) or (args.once and count[0] > 0)
+        done = spin_until(node, finished, args.timeout)
         if error:
             raise error[0]
         if not done and args.timeout is not None:
