@@ -15,6 +15,7 @@ knob handle_stiffness_scale.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -196,17 +197,29 @@ def make_grasp(name: str | None = None, handle_stiffness_scale: float = 1.0, **f
     return GRASPS[name](fig.scaled(float(handle_stiffness_scale)))
 
 
-def twist_forces(x: np.ndarray, v: np.ndarray, a: np.ndarray, b: np.ndarray, n: np.ndarray,
-                 u: np.ndarray, w_grip: np.ndarray, k: float, c: float):
-    """The twist spring on K copies: x, v (N, K, 3); a, b the strap's two node groups; n (K, 3)
+def twist_weights(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n,) weights whose product with the nodes is the strap's span: mean(a) - mean(b); the
+    same weights spread a force on a's centroid (and its opposite on b's) over the nodes."""
+    w = np.zeros(n)
+    w[np.asarray(a)] = 1.0 / len(a)
+    w[np.asarray(b)] = -1.0 / len(b)
+    return w
+
+
+def twist_forces(x: np.ndarray, v: np.ndarray, w: np.ndarray, n: np.ndarray, u: np.ndarray,
+                 w_grip: np.ndarray, k: float, c: float):
+    """The twist spring on K copies: x, v (N, K, 3); w the strap's twist_weights; n (K, 3)
     the handle normal and u (K, 3) the strap's rest long axis, both carried by the gripper;
     w_grip (K, 3) the gripper's angular velocity. The twist is the angle of the strap's current
-    long axis (projected on the plane normal to n) from u about n: torque -(k angle + c rate) n.
+    span (projected on the plane normal to n) from u about n: torque -(k angle + c rate) n.
 
-    Returns (fa, torque_on_gripper): fa (K, 3) the force on group a's centroid (group b gets
-    -fa; each spread equally over its nodes) and the reaction torque on the gripper (K, 3)."""
-    e = x[a].mean(axis=0) - x[b].mean(axis=0)
-    de = v[a].mean(axis=0) - v[b].mean(axis=0)
+    Returns (fa, torque_on_gripper), both (K, 3): fa the force on the span's first group's
+    centroid (spread over the nodes as w[:, None, None] * fa; the second group gets -fa)."""
+    kk = x.shape[1]
+    e = np.einsum("n,nkc->kc", w, x)          # einsum: equal copies summed alike
+    de = np.einsum("n,nkc->kc", w, v)
+    if kk == 1:             # one bag, every step: plain floats (numpy's small-array overhead)
+        return _twist_one(e[0], de[0], n[0], u[0], w_grip[0], k, c)
     ep = e - np.einsum("kc,kc->k", e, n)[:, None] * n
     ang = np.arctan2(np.einsum("kc,kc->k", np.cross(u, ep), n), np.einsum("kc,kc->k", u, ep))
     e2 = np.maximum(np.einsum("kc,kc->k", e, e), 1e-12)
@@ -214,3 +227,22 @@ def twist_forces(x: np.ndarray, v: np.ndarray, a: np.ndarray, b: np.ndarray, n: 
     tau = -(k * ang + c * rate)
     fa = (tau / e2)[:, None] * np.cross(n, e)
     return fa, -np.cross(e, fa)
+
+
+def _twist_one(e, de, n, u, wg, k: float, c: float):
+    """twist_forces for one copy, in floats (same formulas)."""
+    e0, e1, e2 = float(e[0]), float(e[1]), float(e[2])
+    n0, n1, n2 = float(n[0]), float(n[1]), float(n[2])
+    u0, u1, u2 = float(u[0]), float(u[1]), float(u[2])
+    en = e0 * n0 + e1 * n1 + e2 * n2
+    p0, p1, p2 = e0 - en * n0, e1 - en * n1, e2 - en * n2
+    ang = math.atan2((u1 * p2 - u2 * p1) * n0 + (u2 * p0 - u0 * p2) * n1 + (u0 * p1 - u1 * p0) * n2,
+                     u0 * p0 + u1 * p1 + u2 * p2)
+    ee = max(e0 * e0 + e1 * e1 + e2 * e2, 1e-12)
+    d0, d1, d2 = float(de[0]), float(de[1]), float(de[2])
+    rate = (((e1 * d2 - e2 * d1) * n0 + (e2 * d0 - e0 * d2) * n1 + (e0 * d1 - e1 * d0) * n2) / ee
+            - (float(wg[0]) * n0 + float(wg[1]) * n1 + float(wg[2]) * n2))
+    s = -(k * ang + c * rate) / ee
+    f0, f1, f2 = s * (n1 * e2 - n2 * e1), s * (n2 * e0 - n0 * e2), s * (n0 * e1 - n1 * e0)
+    fa = np.array([[f0, f1, f2]])
+    return fa, -np.array([[e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0]])

@@ -18,7 +18,7 @@ from astrobee import config
 from astrobee import rotations as rot
 
 from .base import Bag, BagState, quat_from_matrix
-from ..grasp import twist_forces
+from ..grasp import twist_forces, twist_weights
 from .mass_spring import Anchors, MassSpring, Tethers
 from .mesh import bag_mesh
 from .node_contacts import collide_moving_boxes, collide_static_boxes, grow_boxes
@@ -129,6 +129,7 @@ class FastFemBag(Bag):
              "offsets": (x[hold.anchors] - pos) @ R,                  # gripper frame
              "tether_offsets": np.array([x[t].mean(axis=0) - pos for t in hold.tethers]
                                         ).reshape(-1, 3) @ R}
+        g["all_offsets"] = np.vstack([g["offsets"], g["tether_offsets"]])
         if hold.twist is not None:
             a, b = hold.twist
             e = x[a].mean(axis=0) - x[b].mean(axis=0)
@@ -136,6 +137,7 @@ class FastFemBag(Bag):
             n = rot.rotate(st, self.handles[k])
             g["u"] = (e / np.linalg.norm(e)) @ R
             g["n"] = n @ R
+            g["tw"] = twist_weights(self.num_nodes, a, b)
         self._grasps.append(g)
         self._rebuild_anchors()
         self._targets()
@@ -175,12 +177,13 @@ class FastFemBag(Bag):
         tgt, vel, ttg, tvel, grip = [], [], [], [], []
         for g in self._grasps:
             pos, R, com, vcom, w = self._gripper(g["robot"])
-            t = pos + g["offsets"] @ R.T
-            tgt.append(t)
-            vel.append(vcom + np.cross(w, t - com))
-            t = pos + g["tether_offsets"] @ R.T
-            ttg.append(t)
-            tvel.append(vcom + np.cross(w, t - com))
+            t = pos + g["all_offsets"] @ R.T               # anchors, then tethers: one product
+            tv = vcom + np.cross(w, t - com)
+            na = len(g["offsets"])
+            tgt.append(t[:na])
+            vel.append(tv[:na])
+            ttg.append(t[na:])
+            tvel.append(tv[na:])
             grip.append((com, R, w))
         self._target = np.concatenate(tgt)[:, None, :]
         self._target_vel = np.concatenate(vel)[:, None, :]
@@ -211,13 +214,10 @@ class FastFemBag(Bag):
             if hold.twist is None:
                 twist_tau.append(None)
                 continue
-            a, b = hold.twist
-            fa, tau = twist_forces(x, v, a, b, (R @ g["n"])[None], (R @ g["u"])[None], w[None],
-                                   hold.twist_stiffness, hold.twist_damping)
-            if external is self.external:
-                external = np.zeros_like(x) if external is None else external.copy()
-            external[a] += fa / len(a)
-            external[b] -= fa / len(b)
+            fa, tau = twist_forces(x, v, g["tw"], (R @ g["n"])[None], (R @ g["u"])[None],
+                                   w[None], hold.twist_stiffness, hold.twist_damping)
+            spread = g["tw"][:, None, None] * fa[None]
+            external = spread if external is None else external + spread
             twist_tau.append(tau[0])
         x_prev = x.copy()
         self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel, external,

@@ -39,8 +39,8 @@ class FemRollout:
         """robot_walls False: the robot body passes through the walls (the bag still collides);
         robot_friction: robot-wall Coulomb friction (Bullet's 0.5 x 0.5 of pybullet's run).
         tethers / tether_offsets (G, 3 body frame, from COM): node groups held by their
-        centroids; twist: the strap's twist spring (a, b node groups, u and n body-frame unit
-        vectors, k, c; astrobee_sim.grasp.twist_forces)."""
+        centroids; twist: the strap's twist spring (w its grasp.twist_weights, u and n body-frame
+        unit vectors, k, c; astrobee_sim.grasp.twist_forces)."""
         cfg = config.astrobee()
         self.springs, self.anchors = springs, anchors
         self.offsets = np.asarray(grip_offsets, dtype=float).reshape(-1, 3)   # (A, 3) body, from COM
@@ -91,7 +91,7 @@ class FemRollout:
         twist = None
         if hold.twist is not None:
             _, Rg, _, _, _ = bag._gripper(robot)
-            twist = {"a": hold.twist[0], "b": hold.twist[1], "u": R.T @ (Rg @ g["u"]),
+            twist = {"w": g["tw"], "u": R.T @ (Rg @ g["u"]),
                      "n": R.T @ (Rg @ g["n"]), "k": hold.twist_stiffness,
                      "c": hold.twist_damping}
         ro = cls(bag.springs, anchors, (t - com) @ R, bag.walls, bag.half, k, dt,
@@ -160,12 +160,9 @@ class FemRollout:
             external, twist_tau = None, 0.0
             if self.twist is not None:
                 tw = self.twist
-                a, b = tw["a"], tw["b"]
-                fa, twist_tau = twist_forces(x, v, a, b, R @ tw["n"], R @ tw["u"], self.omega,
+                fa, twist_tau = twist_forces(x, v, tw["w"], R @ tw["n"], R @ tw["u"], self.omega,
                                              tw["k"], tw["c"])
-                external = np.zeros_like(x)
-                external[a] += fa / len(a)
-                external[b] -= fa / len(b)
+                external = tw["w"][:, None, None] * fa[None]
             x_prev = x.copy()
             self.springs.step(x, v, h, self.anchors, target, target_vel, external,
                               self.tethers, ttarget, tvel)

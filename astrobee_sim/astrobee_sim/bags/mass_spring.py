@@ -141,6 +141,17 @@ class Tethers:
         return (tuple(np.asarray(g).tobytes() for g in self.groups), self.stiffness.tobytes(),
                 self.damping.tobytes())
 
+    def weights(self, n: int) -> np.ndarray:
+        """(G, n) averaging rows: row i is 1/len(group i) on the group's nodes (one matrix
+        product takes every centroid; its transpose spreads a force over the group)."""
+        w = getattr(self, "_w", None)
+        if w is None or w.shape[1] != n:
+            w = np.zeros((len(self.groups), n))
+            for i, g in enumerate(self.groups):
+                w[i, np.asarray(g)] = 1.0 / len(g)
+            self._w = w
+        return w
+
 
 class MassSpring:
     """Springs on the tet edges of a mesh (+ Bullet's bending springs) with `mass` spread
@@ -273,10 +284,12 @@ class MassSpring:
             rhs[idx] += h * (anchors.stiffness[:, None, None] * (target - x[idx])
                              + anchors.damping[:, None, None] * target_vel)
         if tethers is not None:
-            for i, g in enumerate(tethers.groups):
-                f = (tethers.stiffness[i] * (tether_target[i] - x[g].mean(axis=0))
-                     + tethers.damping[i] * tether_vel[i])
-                rhs[g] += (h / len(g)) * f
+            # einsum, not BLAS: each copy's column summed in the same order (equal copies stay equal)
+            w = tethers.weights(n)
+            xm = np.einsum("gn,nkc->gkc", w, x)
+            f = (tethers.stiffness[:, None, None] * (tether_target - xm)
+                 + tethers.damping[:, None, None] * tether_vel)
+            rhs += h * np.einsum("gn,gkc->nkc", w, f)
         lu = self.solver(h, anchors, 3 * k, tethers)
         new = lu.solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
         if u is not None and self.damping_iterations > 1:
@@ -297,6 +310,8 @@ class MassSpring:
     def tether_forces(self, x: np.ndarray, v: np.ndarray, tethers: Tethers, target: np.ndarray,
                       target_vel: np.ndarray) -> np.ndarray:
         """(G, K, 3) force each tether exerts on what holds it (the gripper)."""
-        return np.stack([tethers.stiffness[i] * (x[g].mean(axis=0) - target[i])
-                         + tethers.damping[i] * (v[g].mean(axis=0) - target_vel[i])
-                         for i, g in enumerate(tethers.groups)])
+        w = tethers.weights(x.shape[0])
+        xm = np.einsum("gn,nkc->gkc", w, x)
+        vm = np.einsum("gn,nkc->gkc", w, v)
+        return (tethers.stiffness[:, None, None] * (xm - target)
+                + tethers.damping[:, None, None] * (vm - target_vel))
