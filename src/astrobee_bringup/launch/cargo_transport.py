@@ -1,9 +1,10 @@
 """The cargo-transport graph: router, simulator, planner, controller and the bag recorder.
 
 Launch arguments (`name:=value`): scenario (config/scenarios/<name>.yaml, default
-node2_to_jem), controller (a law of astrobee_control.registry: pd | mpc | ...), record (true | false), bag_dir (default <run>/bag),
-clock (realtime | fast | lockstep; default lockstep headless: the sim waits for each
-command, as fast as the graph answers; realtime with gui), lockstep_timeout (wall s the sim
+node2_to_jem), controller (a law of astrobee_control.registry: pd | mpc | ...), record
+(true | false), bag_dir (default <run>/bag), clock (realtime | fast | lockstep; default
+lockstep headless: the sim waits for each command, as fast as the graph answers; realtime
+with gui), lockstep_timeout (wall s the sim
 waits for a tick's command before stepping on; the sim's default when unset), gui (true |
 false), bag_model / bag_variant / bag_resolution / bag_mass / fem_solver / flight_mode /
 robots / realism (a preset of config/realism.yaml) (override the scenario: validated here
@@ -180,7 +181,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     # of any leg gets its own controller (and safety filter) in its namespace
     robots: list[str] = []
     shares: dict[str, float] = {}       # robot -> its share of a bag carried by several robots
-    kinds: dict[str, str] = {}          # robot -> its controller (pd | mpc)
+    kinds: dict[str, str] = {}          # robot -> its controller (a registered law)
     for leg in legs:
         try:
             built = Scenario.load(leg, overrides)
