@@ -216,10 +216,10 @@ def twist_forces(x: np.ndarray, v: np.ndarray, w: np.ndarray, n: np.ndarray, u: 
     Returns (fa, torque_on_gripper), both (K, 3): fa the force on the span's first group's
     centroid (spread over the nodes as w[:, None, None] * fa; the second group gets -fa)."""
     kk = x.shape[1]
+    if kk == 1:             # one bag, every step: BLAS and plain floats
+        return _twist_one(w @ x[:, 0, :], w @ v[:, 0, :], n[0], u[0], w_grip[0], k, c)
     e = np.einsum("n,nkc->kc", w, x)          # einsum: equal copies summed alike
     de = np.einsum("n,nkc->kc", w, v)
-    if kk == 1:             # one bag, every step: plain floats (numpy's small-array overhead)
-        return _twist_one(e[0], de[0], n[0], u[0], w_grip[0], k, c)
     ep = e - np.einsum("kc,kc->k", e, n)[:, None] * n
     ang = np.arctan2(np.einsum("kc,kc->k", np.cross(u, ep), n), np.einsum("kc,kc->k", u, ep))
     e2 = np.maximum(np.einsum("kc,kc->k", e, e), 1e-12)

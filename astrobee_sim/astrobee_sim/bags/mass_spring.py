@@ -117,6 +117,32 @@ class _DenseInverse:
         return self.inv @ b
 
 
+class _LowRank:
+    """A solve with (A0 + W^T D W): A0 pre-factored, W (G, N) the tethers' averaging rows, D
+    their (h^2 K + h C); the Woodbury identity keeps A0's factor (no fill-in from the groups'
+    dense blocks). einsum, not BLAS, so that equal copies' columns stay equal."""
+
+    def __init__(self, base, w: np.ndarray, d: np.ndarray):
+        self.base, self.w = base, w
+        self.z = np.asarray(base.solve(np.ascontiguousarray(w.T)))          # (N, G)
+        self.s = np.linalg.inv(np.diag(1.0 / d) + w @ self.z)               # (G, G)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        y = self.base.solve(b)
+        if y.shape[1] <= 3:                     # one copy: BLAS (no copies to keep equal)
+            return y - self.z @ (self.s @ (self.w @ y))
+        t = np.einsum("gh,hc->gc", self.s, np.einsum("gn,nc->gc", self.w, y))
+        return y - np.einsum("ng,gc->nc", self.z, t)
+
+
+def _means(w: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(G, K, 3) weighted sums w (G, N) of y (N, K, 3): BLAS for one copy, einsum for K (each
+    copy's column summed in the same order, so equal copies stay equal)."""
+    if y.shape[1] == 1:
+        return (w @ y[:, 0, :])[:, None, :]
+    return np.einsum("gn,nkc->gkc", w, y)
+
+
 @dataclass
 class Anchors:
     """Grasped nodes: each pulled toward a target point by an implicit spring + damper."""
@@ -220,27 +246,28 @@ class MassSpring:
     def solver(self, h: float, anchors: Anchors | None, columns: int = 3,
                tethers: Tethers | None = None):
         """The factored matrix M + h c L + diag(h^2 ka + h ca) + the tethers' blocks
-        (h^2 K + h C) / n^2 over each group's n x n nodes (cached per step, anchors, tethers).
+        (h^2 K + h C) / n^2 over each group's n x n nodes (cached per step, anchors, tethers;
+        the tethers by a low-rank update of the factor without them).
 
         Few right-hand sides (one bag): a sparse LU. Many (K copies): the dense inverse, whose
         product with all 3K columns is one BLAS matrix product (several times faster than
         SuperLU's column-by-column triangular solves at K = 64)."""
         dense = columns >= 48 and self.n <= 3000
-        key = (h, None if anchors is None else anchors.key(), dense,
-               None if tethers is None else tethers.key())
+        if tethers is not None and len(tethers.groups):
+            key = (h, None if anchors is None else anchors.key(), dense, tethers.key())
+            lu = self._lu.get(key)
+            if lu is None:
+                lu = _LowRank(self.solver(h, anchors, columns), tethers.weights(self.n),
+                              h * h * tethers.stiffness + h * tethers.damping)
+                self._lu[key] = lu
+            return lu
+        key = (h, None if anchors is None else anchors.key(), dense)
         lu = self._lu.get(key)
         if lu is None:
             diag = np.full(self.n, self.node_mass)
             if anchors is not None and len(anchors.nodes):
                 np.add.at(diag, anchors.nodes, h * h * anchors.stiffness + h * anchors.damping)
-            a = sp.diags(diag) + (h * self.damping) * self.laplacian
-            if tethers is not None:
-                for g, kt, ct in zip(tethers.groups, tethers.stiffness, tethers.damping):
-                    g = np.asarray(g)
-                    r, c = np.meshgrid(g, g, indexing="ij")
-                    val = np.full(r.size, (h * h * kt + h * ct) / len(g) ** 2)
-                    a = a + sp.csr_matrix((val, (r.ravel(), c.ravel())), shape=a.shape)
-            a = a.tocsc()
+            a = (sp.diags(diag) + (h * self.damping) * self.laplacian).tocsc()
             if dense:
                 lu = _DenseInverse(np.linalg.inv(a.toarray()))
             else:
@@ -284,12 +311,10 @@ class MassSpring:
             rhs[idx] += h * (anchors.stiffness[:, None, None] * (target - x[idx])
                              + anchors.damping[:, None, None] * target_vel)
         if tethers is not None:
-            # einsum, not BLAS: each copy's column summed in the same order (equal copies stay equal)
             w = tethers.weights(n)
-            xm = np.einsum("gn,nkc->gkc", w, x)
-            f = (tethers.stiffness[:, None, None] * (tether_target - xm)
+            f = (tethers.stiffness[:, None, None] * (tether_target - _means(w, x))
                  + tethers.damping[:, None, None] * tether_vel)
-            rhs += h * np.einsum("gn,gkc->nkc", w, f)
+            rhs += h * _means(w.T, f)
         lu = self.solver(h, anchors, 3 * k, tethers)
         new = lu.solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
         if u is not None and self.damping_iterations > 1:
@@ -311,7 +336,6 @@ class MassSpring:
                       target_vel: np.ndarray) -> np.ndarray:
         """(G, K, 3) force each tether exerts on what holds it (the gripper)."""
         w = tethers.weights(x.shape[0])
-        xm = np.einsum("gn,nkc->gkc", w, x)
-        vm = np.einsum("gn,nkc->gkc", w, v)
+        xm, vm = _means(w, x), _means(w, v)
         return (tethers.stiffness[:, None, None] * (xm - target)
                 + tethers.damping[:, None, None] * (vm - target_vel))
