@@ -33,3 +33,13 @@ def test_an_import_error_still_raises(tmp_path):
     r = _run("from astrobee_sim.pybullet_import import pybullet\npybullet()", tmp_path)
     assert r.returncode != 0
     assert "broken build" in r.stderr and "ImportError: no bullet here" in r.stderr
+
+
+def test_quiet_drops_only_the_named_lines_on_both_descriptors():
+    r = _run("import os\nfrom astrobee_sim.pybullet_import import SOFT_BODY, quiet\n"
+             "with quiet(SOFT_BODY):\n"
+             "    os.write(1, b'Nodes:  196\\nkept out\\nTetras: 636\\n')\n"
+             "    os.write(2, b'Faces:  292\\nkept err\\n')\n"
+             "print('after')")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "kept out\nafter\n" and r.stderr == "kept err\n", (r.stdout, r.stderr)
