@@ -218,8 +218,9 @@ def twist_forces(x: np.ndarray, v: np.ndarray, w: np.ndarray, n: np.ndarray, u: 
     kk = x.shape[1]
     if kk == 1:             # one bag, every step: BLAS and plain floats
         return _twist_one(w @ x[:, 0, :], w @ v[:, 0, :], n[0], u[0], w_grip[0], k, c)
-    e = np.einsum("n,nkc->kc", w, x)          # einsum: equal copies summed alike
-    de = np.einsum("n,nkc->kc", w, v)
+    pos, neg = np.flatnonzero(w > 0), np.flatnonzero(w < 0)   # gathers: copies summed alike
+    e = x[pos].mean(axis=0) - x[neg].mean(axis=0)
+    de = v[pos].mean(axis=0) - v[neg].mean(axis=0)
     ep = e - np.einsum("kc,kc->k", e, n)[:, None] * n
     ang = np.arctan2(np.einsum("kc,kc->k", np.cross(u, ep), n), np.einsum("kc,kc->k", u, ep))
     e2 = np.maximum(np.einsum("kc,kc->k", e, e), 1e-12)

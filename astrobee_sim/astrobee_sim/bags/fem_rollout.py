@@ -162,7 +162,10 @@ class FemRollout:
                 tw = self.twist
                 fa, twist_tau = twist_forces(x, v, tw["w"], R @ tw["n"], R @ tw["u"], self.omega,
                                              tw["k"], tw["c"])
-                external = tw["w"][:, None, None] * fa[None]
+                external = np.zeros_like(x)
+                a, b = tw["w"] > 0, tw["w"] < 0
+                external[a] += fa / np.count_nonzero(a)
+                external[b] -= fa / np.count_nonzero(b)
             x_prev = x.copy()
             self.springs.step(x, v, h, self.anchors, target, target_vel, external,
                               self.tethers, ttarget, tvel)

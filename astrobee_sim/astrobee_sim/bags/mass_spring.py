@@ -120,10 +120,11 @@ class _DenseInverse:
 class _LowRank:
     """A solve with (A0 + W^T D W): A0 pre-factored, W (G, N) the tethers' averaging rows, D
     their (h^2 K + h C); the Woodbury identity keeps A0's factor (no fill-in from the groups'
-    dense blocks). einsum, not BLAS, so that equal copies' columns stay equal."""
+    dense blocks). The group sums are gathers over the few group nodes and the correction is
+    elementwise, so each copy's columns see the same arithmetic (equal copies stay equal)."""
 
-    def __init__(self, base, w: np.ndarray, d: np.ndarray):
-        self.base, self.w = base, w
+    def __init__(self, base, groups: list, w: np.ndarray, d: np.ndarray):
+        self.base, self.groups, self.w = base, [np.asarray(g) for g in groups], w
         self.z = np.asarray(base.solve(np.ascontiguousarray(w.T)))          # (N, G)
         self.s = np.linalg.inv(np.diag(1.0 / d) + w @ self.z)               # (G, G)
 
@@ -131,16 +132,19 @@ class _LowRank:
         y = self.base.solve(b)
         if y.shape[1] <= 3:                     # one copy: BLAS (no copies to keep equal)
             return y - self.z @ (self.s @ (self.w @ y))
-        t = np.einsum("gh,hc->gc", self.s, np.einsum("gn,nc->gc", self.w, y))
-        return y - np.einsum("ng,gc->nc", self.z, t)
+        t = [y[g].mean(axis=0) for g in self.groups]
+        for i in range(len(self.groups)):
+            c = self.s[i, 0] * t[0]
+            for j in range(1, len(t)):
+                c = c + self.s[i, j] * t[j]
+            y -= self.z[:, i:i + 1] * c
+        return y
 
 
-def _means(w: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """(G, K, 3) weighted sums w (G, N) of y (N, K, 3): BLAS for one copy, einsum for K (each
-    copy's column summed in the same order, so equal copies stay equal)."""
-    if y.shape[1] == 1:
-        return (w @ y[:, 0, :])[:, None, :]
-    return np.einsum("gn,nkc->gkc", w, y)
+def _means(groups: list, y: np.ndarray) -> np.ndarray:
+    """(G, K, 3) centroids of y (N, K, 3) over each node group (gathers: cheap, and equal
+    copies summed alike)."""
+    return np.stack([y[g].mean(axis=0) for g in groups])
 
 
 @dataclass
@@ -257,7 +261,8 @@ class MassSpring:
             key = (h, None if anchors is None else anchors.key(), dense, tethers.key())
             lu = self._lu.get(key)
             if lu is None:
-                lu = _LowRank(self.solver(h, anchors, columns), tethers.weights(self.n),
+                lu = _LowRank(self.solver(h, anchors, columns), tethers.groups,
+                              tethers.weights(self.n),
                               h * h * tethers.stiffness + h * tethers.damping)
                 self._lu[key] = lu
             return lu
@@ -311,10 +316,10 @@ class MassSpring:
             rhs[idx] += h * (anchors.stiffness[:, None, None] * (target - x[idx])
                              + anchors.damping[:, None, None] * target_vel)
         if tethers is not None:
-            w = tethers.weights(n)
-            f = (tethers.stiffness[:, None, None] * (tether_target - _means(w, x))
+            f = (tethers.stiffness[:, None, None] * (tether_target - _means(tethers.groups, x))
                  + tethers.damping[:, None, None] * tether_vel)
-            rhs += h * _means(w.T, f)
+            for i, g in enumerate(tethers.groups):
+                rhs[g] += (h / len(g)) * f[i]
         lu = self.solver(h, anchors, 3 * k, tethers)
         new = lu.solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
         if u is not None and self.damping_iterations > 1:
@@ -335,7 +340,6 @@ class MassSpring:
     def tether_forces(self, x: np.ndarray, v: np.ndarray, tethers: Tethers, target: np.ndarray,
                       target_vel: np.ndarray) -> np.ndarray:
         """(G, K, 3) force each tether exerts on what holds it (the gripper)."""
-        w = tethers.weights(x.shape[0])
-        xm, vm = _means(w, x), _means(w, v)
+        xm, vm = _means(tethers.groups, x), _means(tethers.groups, v)
         return (tethers.stiffness[:, None, None] * (xm - target)
                 + tethers.damping[:, None, None] * (vm - target_vel))
