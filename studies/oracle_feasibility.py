@@ -2,7 +2,8 @@
 pair model): bumps of 2.5 / 5 / 7.5 / 10 N for 0.2 s on the bag at the study runner's seeded
 time U(10, 30) s and direction (astrobee_lab.oracle.solve.bump_of_seed), seeds 0..19.
 
-    python studies/oracle_feasibility.py [--seeds 20] [--out studies/results/oracle/feasibility.csv]
+    python studies/oracle_feasibility.py [--seeds 20] [--first-seed 0] [--out studies/results/oracle/feasibility.csv]
+    python -c "import sys; sys.path.insert(0, 'studies'); import oracle_feasibility as o; o.table(*CSVS)"
 
 Resumable: rows already in the CSV are skipped. Prints the table of docs/results/oracle.md.
 """
@@ -25,6 +26,7 @@ FIELDS = ["magnitude", "seed", "bump_time", "fx", "fy", "fz", "feasible", "statu
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--out", default="studies/results/oracle/feasibility.csv")
     ap.add_argument("--magnitudes", type=float, nargs="*", default=list(MAGNITUDES))
     a = ap.parse_args()
@@ -39,8 +41,8 @@ def main() -> None:
         w = csv.DictWriter(f, FIELDS)
         if new:
             w.writeheader()
-        for mag in a.magnitudes:
-            for seed in range(a.seeds):
+        for seed in range(a.first_seed, a.seeds):          # seed-major: a partial run covers every size
+            for mag in a.magnitudes:
                 if (mag, seed) in done:
                     continue
                 b = so.bump_of_seed(seed, mag)
@@ -55,9 +57,11 @@ def main() -> None:
     table(a.out)
 
 
-def table(path: str) -> None:
-    with open(path) as f:
-        rows = list(csv.DictReader(f))
+def table(*paths: str) -> None:
+    rows = []
+    for path in paths:
+        with open(path) as f:
+            rows += list(csv.DictReader(f))
     print("| bump (N) | feasible / seeds | median solve time (s) | max solve time (s) |")
     print("|---|---|---|---|")
     for mag in sorted({float(r["magnitude"]) for r in rows}):

@@ -69,7 +69,8 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
             tail.append((np.linalg.norm(np.asarray(p) - leg.goal_position),
                          rot.angle_between(rot.normalize(np.asarray(q, float)), leg.goal_orientation),
                          np.linalg.norm(v), np.linalg.norm(w)))
-    log = fl.sim.disturbance_log() if hasattr(fl.sim, "disturbance_log") else []
+    log = getattr(fl.sim, "disturbance_log", [])
+    log = log() if callable(log) else log
     fl.close()
     tail = np.array(tail)
     goal, att, speed, omega = tail.max(axis=0)

@@ -2,6 +2,7 @@
 definition, one parameter set), plus an RK4 step for multiple shooting."""
 from __future__ import annotations
 
+import tempfile
 from typing import Any
 
 from astrobee_control import pair_model as pm
@@ -21,14 +22,21 @@ _STEPS: dict = {}
 
 def casadi_step(params: pm.PairParams, substeps: int = 1, jit: bool = False) -> Any:
     """casadi.Function F(x, u, bump, h) -> x after h s (RK4, `substeps` steps, quaternions
-    renormalised after each as pair_model.rk4 does). jit: compiled by the C compiler (with its
-    derivatives): the oracle's Hessian evaluations are ~all of its solve time otherwise."""
+    renormalised after each as pair_model.rk4 does). jit: the derivative (and the derivatives of
+    it that IPOPT's Hessian needs) compiled by the C compiler: evaluating them is ~all of the
+    oracle's solve time otherwise. The RK4 is an MX graph of calls to that small function."""
     key = (params, substeps, jit)
     if key in _STEPS:           # one Function per process: its compiled derivatives are reused
         return _STEPS[key]
     import casadi as ca
-    f = casadi_derivative(params)
-    x, u, b, h = ca.SX.sym("x", pm.NX), ca.SX.sym("u", pm.NU), ca.SX.sym("bump", 3), ca.SX.sym("h")
+    opts = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False,
+                                                       "directory": tempfile.gettempdir()}} \
+        if jit else {}
+    xs, us, bs = ca.SX.sym("x", pm.NX), ca.SX.sym("u", pm.NU), ca.SX.sym("bump", 3)
+    out = pm.derivative([xs[i] for i in range(pm.NX)], [us[i] for i in range(pm.NU)],
+                        [bs[i] for i in range(3)], params)
+    f = ca.Function("pair_xdot", [xs, us, bs], [ca.vertcat(*out)], opts)
+    x, u, b, h = ca.MX.sym("x", pm.NX), ca.MX.sym("u", pm.NU), ca.MX.sym("bump", 3), ca.MX.sym("h")
     dt = h / substeps
     xk = x
     for _ in range(substeps):
@@ -39,9 +47,7 @@ def casadi_step(params: pm.PairParams, substeps: int = 1, jit: bool = False) -> 
         xk = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         qr, qb = xk[6:10], xk[13:17]
         xk = ca.vertcat(xk[0:6], qr / ca.norm_2(qr), xk[10:13], qb / ca.norm_2(qb), xk[17:])
-    opts = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False},
-            "jit_temp_suffix": False, "jit_name": "pair_step"} if jit else {}
-    _STEPS[key] = ca.Function("pair_step", [x, u, b, h], [xk], opts)
+    _STEPS[key] = ca.Function("pair_step", [x, u, b, h], [xk])
     return _STEPS[key]
 
 

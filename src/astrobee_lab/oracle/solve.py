@@ -5,7 +5,8 @@ the disturbance known in advance, solved by direct multiple shooting (CasADi + I
 and body-wrench commands on a coarse grid (default 0.5 s, RK4 in 0.25 s substeps, a node at the
 bump's start and end so the pulse is integrated exactly), per-axis wrench boxes of the flight
 mode, the propulsion lag in the state, the robot's centre in the planner's safe boxes (keep-in
-shrunk by the robot's radius) and the bag's 8 corners in the keep-in boxes (each point's box is
+shrunk by the robot's radius) and the bag's 8 corners in the keep-in boxes shrunk by
+`bag_margin` (each point's box is
 the one holding it along the planned trajectory: the union of boxes is not convex, so the
 assignment is fixed by the plan; a recovery through a different box is not searched). Only the
 window from `lead` s before the bump to plan end + budget is solved, from the planned state with
@@ -29,6 +30,11 @@ from astrobee_control import pair_model as pm
 REST_SPEED, REST_OMEGA = 0.01, 0.02     # m/s, rad/s: the verdict's "at rest"
 MARGIN = 0.8                             # the NLP asks for 80% of the rest thresholds
 BOX_TOL = 1e-3                           # m a point may sit outside its box and still count
+BAG_MARGIN = 0.05                        # m the bag's corners keep from the walls: flown with
+                                         # 0, the oracle's plans rode the bag along a wall
+                                         # and the FEM bag touched it (bench/oracle_fly.py)
+_KEEP: list = []                         # the last problems: CasADi caches the compiled
+                                         # derivatives only while something holds them
 
 
 @dataclass(frozen=True)
@@ -149,10 +155,12 @@ def time_grid(t0: float, t_end: float, grid: float, bump: Bump | None) -> np.nda
 def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: float = 30.0,
           grid: float = 0.5, lead: float = 1.0, t0: float | None = None, hold: float = 2.0,
           substep: float = 0.25, max_iter: int = 600, lag: float | None = None,
-          x0: np.ndarray | None = None, jit: bool = True) -> OracleResult:
+          x0: np.ndarray | None = None, jit: bool = True,
+          bag_margin: float = BAG_MARGIN) -> OracleResult:
     """Solve the oracle's problem (module docstring). t0: the window's start (default: `lead`
     s before the bump, or 0 without one); lag overrides params.lag; x0 the start state (default:
-    the plan's at t0, planned_state)."""
+    the plan's at t0, planned_state); bag_margin (m) the bag's corners keep from the keep-in
+    boxes' faces (the station's walls)."""
     import casadi as ca
 
     from .model import casadi_points, casadi_step
@@ -184,6 +192,7 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
     keep = np.vstack([raw, bx.passage_boxes(raw)])
     robot_box = safe[_deepest(safe, X0[:, pm.P_R])]
     corner_box = keep[_deepest(keep, guess_corners.reshape(-1, 3))].reshape(len(ts), 8, 6)
+    corner_box = corner_box + np.array([1, 1, 1, -1, -1, -1]) * float(bag_margin)
 
     opti = ca.Opti()
     X = opti.variable(pm.NX, N + 1)
@@ -232,6 +241,8 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
         status = opti.stats().get("return_status", "failed")
         xs, us = np.asarray(opti.debug.value(X)).T, np.asarray(opti.debug.value(U)).T
     solve_time = time.perf_counter() - t_start
+    if jit:
+        _KEEP[:] = _KEEP[-1:] + [opti]
     us = us.reshape(N, pm.NU)
     viol = violations(xs, ts, params, leg, robot_box, corner_box, corners, hold, t_end)
     ok = bool(np.all(np.isfinite(xs))) and viol["box"] <= BOX_TOL and viol["rest_speed"] < REST_SPEED \
