@@ -83,6 +83,10 @@ def main() -> None:
     wtrain = sysid.pair_windows(train, 2.0, every=1.0)
     t1 = time.perf_counter()
     fitted = sysid.fit_pair(base, wtrain, max_nfev=a.max_nfev) if a.max_nfev > 0 else base
+    # the fit puts ~4.9 N s/m of drag on the bag's velocity; no external force takes momentum
+    # from the FEM bag (measured: held-out errors equal or lower without it), and the oracle must
+    # not get free damping of a bump's momentum: kept at 0
+    fitted = fitted.with_(bag_drag=0.0)
     print(f"fit {time.perf_counter() - t1:.0f} s: {fitted.to_dict()}")
     rigid = fitted.with_(stiffness=(200.0, 200.0, 200.0), damping=(20.0, 20.0, 20.0))
     wheld = sysid.pair_windows(held, 5.0, every=1.0)
