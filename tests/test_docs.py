@@ -22,7 +22,10 @@ NODES = {
     "controller": ("astrobee_control.pd_controller_node",
                    ["-p", "use_sim_time:=true", "-p", "safety:=true"], "pd_controller_node"),
     "safety_filter": ("astrobee_control.safety_filter_node", ["-p", "use_sim_time:=true"], "safety_filter"),
+    "controller (wmpc)": (None, ["-p", "use_sim_time:=true", "-p", "safety:=true"], "wmpc_controller_node"),
 }
+GENERIC = ("import sys; from astrobee_control.controller_node import generic_main; "
+           "sys.exit(generic_main(sys.argv))")
 IGNORED = re.compile(r"/rosout$|parameter|/describe_parameters|/get_parameter|/list_parameters|/set_parameters")
 
 
@@ -78,9 +81,11 @@ def test_topic_table_matches_the_nodes():
     want: dict[str, set] = {n: set() for n in NODES}
     for node, kind, name, typ in table_rows():
         want[node].add((kind, name, typ))
+    want["controller (wmpc)"] |= want["controller"]      # every law's rows, and its own
     with testing.router() as port:
         env = testing.zenoh_env(port)
-        procs = {n: testing.spawn(testing.python_cmd("-m", mod, "--ros-args", *args), env)
+        procs = {n: testing.spawn(testing.python_cmd("-m", mod, "--ros-args", *args) if mod else
+                                  testing.python_cmd("-c", GENERIC, "wmpc", "--ros-args", *args), env)
                  for n, (mod, args, _) in NODES.items()}
         ctx = roszen.Context(env=env)
         try:
