@@ -1,4 +1,4 @@
-"""The controller study of issue 11 through the study runner: PD vs MPC-A vs MPC-B carrying the
+"""The controller study through the study runner: PD vs MPC-A vs MPC-B carrying the
 FEM bag with the realism knobs on (studies/controller_study.yaml), then its report's tables.
 
 Usage:

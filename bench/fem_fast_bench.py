@@ -9,7 +9,7 @@ bag-seconds per wall second and per CPU second, rounds interleaved, beside sim_r
 
 Same loop as bench/sim_rtf.py's library column (physics at 350 Hz, one PD command per 16 ms
 tick, bag state + clearance + contacts read every tick), both solvers in the same run.
-Targets (issue 12): ~400 nodes >= 3x real time (goal 10x), ~1500 nodes >= 1x.
+Targets: ~400 nodes >= 3x real time (goal 10x), ~1500 nodes >= 1x.
 
     .venv/bin/python bench/fem_fast_bench.py [--full]
 """

@@ -2,7 +2,7 @@
 (controller:=pair) and its wrench allocation, on one core, robot + 10 kg bag in Node 2 on a
 30 s leg of 2 m towards the JEM (real keep-in boxes), the state following the plan with noise
 (each decision warm-started from the last), and a spun case (the pair turned 0.3 rad, turning
-at 0.1 rad/s). Prints median and p99 beside the 50 ms target (issue 25).
+at 0.1 rad/s). Prints median and p99 beside the 50 ms target.
 
     .venv/bin/python bench/pair_control_bench.py [--repeats 60]
 """

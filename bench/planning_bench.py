@@ -1,7 +1,7 @@
 """Planning benchmark: global planner per route (plan time, plan + 350 Hz sampling, trajectory
 duration, time-optimality gap against the trapezoid lower bound, QP solves and interior-point
 iterations, peak speed against the flight mode's limit) and 350 Hz sampling alone, beside the paper's
-code (pyastrobee, measured side by side in issue 17), two-robot formation plans beside the
+code (pyastrobee, measured side by side), two-robot formation plans beside the
 single-robot ones, and the local planner (plan + 350 Hz samples of a 5 s plan)."""
 from __future__ import annotations
 
@@ -18,12 +18,12 @@ from astrobee import rotations as rot
 from astrobee_planning import local_planner, multi_robot, planner
 
 RATE = 350.0      # Hz, the paper's sampling rate
-# issue 17: the paper's code on the same machine, plan + 350 Hz samples / its trajectory (s)
+# the paper's code on the same machine, plan + 350 Hz samples / its trajectory (s)
 PAPER = {("node_2", "jem"): (4.75, 60.5), ("jem", "node_1"): (9.72, 199.3),
          ("jem", "cupola"): (16.05, 273.3), ("eu_lab", "jem"): (6.14, 98.8),
          ("us_lab", "node_3"): (8.49, 87.6)}
 PAPER_LOCAL = 189.0   # ms, local planner 5 s plan + samples
-TARGET = 0.1          # s, issue 17: every route's plan + 350 Hz samples on a quiet machine
+TARGET = 0.1          # s, every route's plan + 350 Hz samples on a quiet machine
 FORMATION = [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2", "eu_lab"),
              ("jem", "node_1")]
 FORMATION_BEFORE = {("node_2", "jem"): "1.0-1.3 s", ("node_1", "node_3"): "0.7-3 s"}

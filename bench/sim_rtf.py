@@ -6,7 +6,7 @@ the ROS 2 wire (publishing every topic, one command per tick, router in between:
 counts), and sim_node in fast clock mode (no waiting: its own throughput, publishing included).
 The FEM bag on the fast solver (the default) and on Bullet's (the reference), same run.
 
-Table 2 (issue 12 / 11): the whole graph as `astrobee launch cargo_transport` starts it (router,
+Table 2: the whole graph as `astrobee launch cargo_transport` starts it (router,
 sim_node in lockstep, planner, the PD or MPC controller process, mission; no recorder) flying
 Node 2 -> JEM with the FEM bag: the mission's real-time factor over the 44 s flight. Bullet's
 solver in the same run as the reference. And K=64 batched copies of the fast FEM bag + robot
@@ -274,7 +274,7 @@ def batched_rtf(res: int, k: int, seconds: float) -> tuple[float, int]:
         sim.close()
 
 
-# issue 12: the reduced models through sim_node in fast clock mode with a controller in the loop,
+# the reduced models through sim_node in fast clock mode with a controller in the loop,
 # before the per-tick overhead cut (README: wall x real time, the ranges of several runs)
 NODE_FAST_BEFORE = {"rigid": "24-40x", "constraint": "21-30x"}
 

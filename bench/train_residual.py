@@ -1,4 +1,4 @@
-"""The learned baseline (issue 15): a residual policy on top of the PD tracker, trained with
+"""The learned baseline: a residual policy on top of the PD tracker, trained with
 Stable-Baselines3 (PPO) for a fixed budget on AstrobeeCargo-v0 with a reduced bag and the
 realism knobs on, then evaluated beside PD alone on the same seeds. Prints one table.
 

@@ -28,7 +28,7 @@ With `safety:=true` the node filters its own command through the CBF safety filt
 (safety.LawFilter: the same filter, keep-in boxes, carried-bag extent and flight-mode limits as
 safety_filter_node, with the state the law was given) before publishing it, and publishes the
 filter's latched diagnostics on <ns>/gnc/ctl/safety as safety_filter_node does: no process and
-no hop of its own in the lockstep loop (issue 16).
+no hop of its own in the lockstep loop.
 """
 from __future__ import annotations
 

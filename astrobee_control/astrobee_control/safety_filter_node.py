@@ -1,5 +1,5 @@
 """safety_filter_node: the CBF-QP safety filter (safety/filter.py) between a controller and the
-robot (issue 16).
+robot.
 
 Subscribes <ns>/gnc/ctl/command_nominal (FamCommand, the controller's BODY-frame wrench),
 <ns>/gnc/ekf (EkfState: position, velocity (world), orientation, omega (body)),

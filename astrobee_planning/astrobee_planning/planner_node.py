@@ -192,7 +192,7 @@ class PlannerNode:
             rate = self._rate(req.sample_rate)
             start = cv.control_state_to_dict(req.start)
             goal = cv.control_state_to_dict(req.goal)
-            try:     # bounded: duration, states, keep-in, the flight mode's limits (issue 19)
+            try:     # bounded: duration, states, keep-in, the flight mode's limits
                 traj = local_planner.plan_within_limits(start, goal, float(req.duration),
                                                         self.current_mode or self.default_mode)
                 trajectory.check_sample_count(traj.duration, rate)

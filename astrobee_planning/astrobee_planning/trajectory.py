@@ -24,7 +24,7 @@ BLOCK = 3072   # samples evaluated together: the work rows of a block stay in ca
                # thin shapes costs 20x more on a busy machine)
 _work = threading.local()
 MAX_STATES = 100_000   # states a sampling may return for a request from outside (a service
-                       # response): 285 s at 350 Hz; a million took 65 s and 2 GB (issue 19)
+                       # response): 285 s at 350 Hz; a million took 65 s and 2 GB
 
 
 def sample_count(duration: float, rate: float) -> int:

@@ -1,4 +1,4 @@
-"""Bags on sim time (issue 14): `bag record --use-sim-time` stamps with /clock (a lockstep
+"""Bags on sim time: `bag record --use-sim-time` stamps with /clock (a lockstep
 flight replays at its own pace; a reset does not run the bag's time backwards), `bag play
 --clock` is the only time base on /clock and it never goes back, `--exclude-topics` and
 `--exclude-regex` in record and play."""

@@ -1,4 +1,4 @@
-"""Bad numeric arguments of the roszen verbs: exit 1 with one line naming the argument (issue 19.11).
+"""Bad numeric arguments of the roszen verbs: exit 1 with one line naming the argument.
 
 Parsing fails before any node is created, so no router is needed.
 """

@@ -1,4 +1,4 @@
-"""Launch arguments of cargo_transport checked before anything starts (issue 27.8): each bad
+"""Launch arguments of cargo_transport checked before anything starts: each bad
 value is one line naming the argument, exit 1, no process started and no run folder (nor a
 rosbag2_<time>/ in the working directory); numbers reach sim_node as YAML floats; the mission
 stopped while it starts exits 130 without a traceback."""

@@ -1,6 +1,6 @@
-"""One-line failures (issue 14): a node that cannot start ends the launch with one line naming
+"""One-line failures: a node that cannot start ends the launch with one line naming
 it and its cause, with no traceback from the others; the cause reaches summary.json; Ctrl-C
-never prints a traceback (nor is it swallowed inside a zenoh callback: issue 19.6); rejected
+never prints a traceback (nor is it swallowed inside a zenoh callback); rejected
 launches leave no run folder; --show-args, arguments anywhere, --port over the environment."""
 from __future__ import annotations
 

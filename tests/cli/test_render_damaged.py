@@ -1,4 +1,4 @@
-"""`astrobee bag render` of a damaged recording (issue 27.7): 4 KB of zeros in the MCAP or 50
+"""`astrobee bag render` of a damaged recording: 4 KB of zeros in the MCAP or 50
 flipped bits end in one line naming the file, exit 1, no traceback (they were a ZstdError or
 BagError traceback); the recording reader turns a damaged chunk into RecordingError."""
 from __future__ import annotations

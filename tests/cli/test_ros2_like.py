@@ -1,4 +1,4 @@
-"""ros2-like behaviour users expect (issue 14): `-r __ns:=` moves the planner's topics and
+"""ros2-like behaviour users expect: `-r __ns:=` moves the planner's topics and
 services; `topic echo` with a type says when the topic is unknown or published under another
 type; one "no router" warning, worded once."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A recording every viewer shows whole (issue 14): sim_node publishes the cargo bag's surface
+"""A recording every viewer shows whole: sim_node publishes the cargo bag's surface
 as a visualization_msgs/Marker TRIANGLE_LIST (/sim/bag/marker, at the mesh rate), the robot's
 URDF on latched /robot_description and its boxes on latched /sim/robot_markers (the module
 labels are in /sim/markers);

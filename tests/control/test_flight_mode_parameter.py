@@ -1,4 +1,4 @@
-"""The controller's flight_mode parameter shows the mode in effect (issue 27.3): a mode announced
+"""The controller's flight_mode parameter shows the mode in effect: a mode announced
 on /mob/flight_mode (or a segment's) is what `param get` says; the parameter stays settable, and
 a set is not undone by the same mode announced again (the latched sample), only by a change."""
 from __future__ import annotations

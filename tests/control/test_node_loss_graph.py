@@ -1,5 +1,5 @@
 """controller_node's parameters and peer-loss watch, in a lockstep loop with sim_node (rigid
-backend) in other processes (issue 19, items 7 and 8): `astrobee param set` refuses read-only,
+backend) in other processes: `astrobee param set` refuses read-only,
 non-finite and out-of-range values with a reason and applies run-time ones; a sim killed with
 SIGKILL is reported as a lost node on /mob/state and in one log line, and commanding stops."""
 import subprocess

@@ -1,4 +1,4 @@
-"""pd_controller_node with safety:=true in the graph (issue 16): router + sim_node (numpy rigid
+"""pd_controller_node with safety:=true in the graph: router + sim_node (numpy rigid
 backend, lockstep) + the controller, whose segment is aimed through the nearest wall; the
 CBF filter inside the controller's process stops the robot short of the wall and publishes its
 latched diagnostics on /gnc/ctl/safety (no safety_filter_node, no command_nominal topic)."""

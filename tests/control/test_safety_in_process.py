@@ -1,6 +1,6 @@
 """The CBF safety filter in the controller's process (controller_node safety:=true) and in its own
 (safety_filter_node) give the same command for the same input, and so does Flight's: all three
-filter through safety.LawFilter (issue 16). Nodes are built in this process and their callbacks
+filter through safety.LawFilter. Nodes are built in this process and their callbacks
 called directly (no spinning; the session router only lets the nodes be created)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""safety_filter_node in the graph (issue 16): router + sim_node (lockstep) + safety_filter_node +
+"""safety_filter_node in the graph: router + sim_node (lockstep) + safety_filter_node +
 this test acting as a broken controller commanding full thrust at the nearest wall; the filter
 keeps the robot off the wall and says it intervened."""
 

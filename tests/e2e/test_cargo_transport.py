@@ -228,7 +228,7 @@ def test_sigint_leaves_nothing_behind(tmp_path, config_dir, launches):
 
 def test_bag_override_reaches_every_node(tmp_path, config_dir, launches):
     """`bag_model:=` on a scenario without a bag: the sim builds the bag, publishes the scenario
-    it built, and the mission reports the bag and plans with its margin (issue 10)."""
+    it built, and the mission reports the bag and plans with its margin."""
     run = tmp_path / "run"
     launch = Launch(run, config_dir, "scenario:=short_hop", "bag_model:=rigid")
     launches.append(launch)

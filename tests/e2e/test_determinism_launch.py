@@ -1,4 +1,4 @@
-"""A lockstep launch is deterministic for a seed (issue 19.9): two `astrobee launch
+"""A lockstep launch is deterministic for a seed: two `astrobee launch
 cargo_transport` runs of the same short hop with the same seed record identical
 /loc/truth/pose streams (every stamp and pose, start to end, read from the two recordings);
 another seed (the hop has initial position noise) records another flight.

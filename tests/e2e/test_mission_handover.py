@@ -1,4 +1,4 @@
-"""The mission's deterministic hand-over outside the launcher (issue 19.9): sim_node (rigid
+"""The mission's deterministic hand-over outside the launcher: sim_node (rigid
 backend, lockstep, start_paused), planner, PD controller, a recorder and `mission --handover
 --await-recorder`, each its own process. The sim publishes no state until the mission's reset,
 then exactly one pose per tick from t=0 to the chunk end at which the leg ended (nothing after:

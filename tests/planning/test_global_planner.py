@@ -141,7 +141,7 @@ def test_boundary_velocity():
     np.testing.assert_allclose(v, [v0, v1], atol=1e-7)
 
 
-# issue 17: the paper's code's trajectory on each route (s), planned rest to rest, nominal
+# the paper's code's trajectory on each route (s), planned rest to rest, nominal
 PAPER = {("node_2", "jem"): 60.5, ("jem", "node_1"): 199.3, ("jem", "cupola"): 273.3,
          ("eu_lab", "jem"): 98.8, ("us_lab", "node_3"): 87.6}
 

@@ -128,7 +128,7 @@ def test_plan_formation_from_robot_poses():
     # the bag's axes in the formation frame (x along the robots' line = world -y), its
     # height grown by its 0.1 m distance from the midpoint
     np.testing.assert_allclose(grown.formation.bag_half, [0.21, 0.25, 0.125 + 0.1], atol=1e-9)
-    # a sampling over the cap a response may hold is refused in one line (issue 19 item 3)
+    # a sampling over the cap a response may hold is refused in one line
     assert plan.robots[0].sample_rate(10.0, max_states=100_000).t[-1] == plan.robots[0].duration
     with pytest.raises(ValueError, match="more than the 100 a request may ask for"):
         plan.robots[1].sample_rate(10.0, max_states=100)

@@ -1,4 +1,4 @@
-"""Bounded planner requests (issue 19 item 3): a local plan of 1e5 s returned a million states,
+"""Bounded planner requests: a local plan of 1e5 s returned a million states,
 a goal 1e9 m away succeeded. The library rejects them with one-line ValueErrors; the node
 answers with a failure code and keeps serving."""
 import time

@@ -1,4 +1,4 @@
-"""Issue 19 hardening of the runtime: bounded memory and logs under floods, processes that
+"""hardening of the runtime: bounded memory and logs under floods, processes that
 exit, Ctrl-C never swallowed, spoofed attachments dropped (each test reproduced the fault first)."""
 from __future__ import annotations
 

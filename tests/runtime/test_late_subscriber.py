@@ -1,4 +1,4 @@
-"""A late-joining `topic echo` gets its first message (issue 27, the interop check's miss).
+"""A late-joining `topic echo` gets its first message (the interop check's miss).
 
 The graph cache declares its liveliness subscriber (with history) before its liveliness query,
 so a token declared at any moment reaches it by one of the two. The window found is in `topic

@@ -1,5 +1,5 @@
 """A liveliness token advertising a known topic with another type must not stop the bag
-recorder from recording the real publisher (issue 19.10)."""
+recorder from recording the real publisher."""
 from __future__ import annotations
 
 import threading

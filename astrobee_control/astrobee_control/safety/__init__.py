@@ -1,4 +1,4 @@
-"""CBF safety filter (issue 16): the algorithm, free of transport.
+"""CBF safety filter: the algorithm, free of transport.
 
     from astrobee_control.safety import SafetyFilter, SafetyResult, BodySphere
     filt = SafetyFilter(flight_modes.get("nominal"), mass.robot())
