@@ -40,9 +40,14 @@ def test_stray_clock_is_ignored_by_recorder_and_nodes(tmp_path, capfd):
             rec = Recorder(rec_node, writer, topics=["/tick"], use_sim_time=True)
             rec.discover()
             assert testing.wait_until(lambda: (rec.discover() or True) and "/tick" in rec.subscriptions, 10)
-            # the real clock first, then the stray one interleaved with it
-            _clock(clock_pub, 1)
-            assert testing.spin_until(listener, lambda: listener.get_clock().now_ns() == 1_000_000_000, 10)
+            # the real clock first (until both clients heard it: the first publisher heard is
+            # the clock), then the stray one interleaved with it
+            def heard() -> bool:
+                _clock(clock_pub, 1)
+                listener.spin_once(timeout_sec=0.05)
+                return (listener.get_clock().now_ns() == 1_000_000_000
+                        and rec.sim.last == 1_000_000_000)
+            assert testing.wait_until(heard, 10, period=0.05)
             stray_pub = stray.create_publisher("rosgraph_msgs/msg/Clock", "/clock", CLOCK)
             assert testing.wait_until(lambda: len(rec_node.get_publishers_info_by_topic("/clock")) == 2, 10)
             tick = roszen.message_class("std_msgs/msg/Int32")()
