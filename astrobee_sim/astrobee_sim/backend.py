@@ -26,7 +26,7 @@ from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.scenario import Scenario, ScenarioError
 
 from .bags.base import BagState
-from .world import World
+from .world import World, sim_defaults  # noqa: F401 - sim_defaults lives with the station
 
 # backend name -> "module:class" of its implementation (imported when asked for)
 _IMPLEMENTATIONS = {"pybullet": "astrobee_sim.simulation:Simulation",
@@ -53,11 +53,6 @@ class BagInfo:
     model: str
     variant: str
     nodes: int              # FEM nodes, or rigid parts of the reduced models
-
-
-def sim_defaults() -> dict:
-    """The `simulator:` section of config/astrobee.yaml (empty if absent)."""
-    return dict(config.astrobee().get("simulator") or {})
 
 
 def check_seed(seed: Any) -> int:

@@ -310,6 +310,11 @@ def module_colour(name: str) -> tuple[float, float, float]:
 _STATIONS: dict[float, World] = {}
 
 
+def sim_defaults() -> dict:
+    """The `simulator:` section of config/astrobee.yaml (empty if absent)."""
+    return dict(config.astrobee().get("simulator") or {})
+
+
 def station(wall_thickness: float = 0.25) -> World:
     """The procedural ISS geometry (cached per thickness: it only depends on config/iss.yaml).
 

@@ -71,7 +71,7 @@ class FastFemBag(Bag):
                                   str(self.params.get("damping_mode", "spring")),
                                   int(self.params.get("damping_iterations", 1)))
         if walls is None:
-            from ..simulation import sim_defaults, station
+            from ..world import sim_defaults, station
             walls = station(float(sim_defaults().get("wall_thickness", 0.25))).walls
         self.walls = np.asarray(walls, dtype=float)
         self.friction = float(self.params.get("friction", 0.5))
