@@ -28,7 +28,7 @@ def reference(scenario: dict, mode) -> tuple[SampledTrajectory, str]:
     goal = np.asarray(scenario["goal"]["position"], float)
     q1 = np.asarray(scenario["goal"]["orientation"], float)
     try:
-        from astrobee_planning.global_planner import plan_position
+        from astrobee_planning.position_planner import plan_position
         plan = plan_position(start, goal, mode.hard_limit_vel, mode.hard_limit_accel)
         sp = plan.spline
         t = np.arange(0.0, sp.duration, 0.1)

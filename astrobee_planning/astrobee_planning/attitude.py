@@ -13,7 +13,7 @@ import numpy as np
 
 from astrobee import rotations as rot
 
-from .global_planner import Spline
+from .position_planner import Spline
 from .quaternion_poly import QuaternionPolynomial
 
 

@@ -17,16 +17,10 @@ import numpy as np
 
 from astrobee import config
 
+from .errors import NoRoute, OutsideSafeSet
+
 MIN_OVERLAP = 0.02   # m: two safe boxes are neighbours when their intersection is this thick
 BOX_PENALTY = 1.0    # m added per box entered: fewer, longer segments (a smaller QP)
-
-
-class NoRoute(RuntimeError):
-    """No chain of overlapping safe boxes joins the two points."""
-
-
-class OutsideSafeSet(ValueError):
-    """A point lies in no safe box."""
 
 
 def robot_radius() -> float:

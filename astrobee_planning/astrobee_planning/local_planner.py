@@ -18,7 +18,7 @@ from astrobee import config, flight_modes
 from astrobee import rotations as rot
 
 from . import bezier
-from .boxes import OutsideSafeSet
+from .errors import OutsideSafeSet
 from .quaternion_poly import _H, QuaternionPolynomial
 from .trajectory import BezierPiece, Trajectory
 

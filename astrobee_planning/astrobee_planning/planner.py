@@ -18,8 +18,9 @@ from astrobee import flight_modes
 from astrobee import rotations as rot
 
 from . import attitude
-from .boxes import NoRoute, OutsideSafeSet, SafeSet, safe_set
-from .global_planner import PlanningError, Spline, plan_position
+from .boxes import SafeSet, safe_set
+from .errors import NoRoute, OutsideSafeSet, PlanError, PlanningError
+from .position_planner import Spline, plan_position
 from .quaternion_poly import peak_rates_batch, reorientation
 from .trajectory import BezierPiece, Trajectory
 
@@ -34,14 +35,6 @@ VIOLATES_KEEP_IN = -29
 POS_EPS = 1e-3     # m: start and goal closer than this are the same position
 ATT_EPS = 1e-3     # rad
 QUAT_TOL = 1e-3    # tolerated |norm - 1| of a given quaternion
-
-
-class PlanError(RuntimeError):
-    """A plan request failed; `code` is the Astrobee Motion result code."""
-
-    def __init__(self, code: int, message: str):
-        super().__init__(message)
-        self.code = code
 
 
 @dataclass

@@ -26,8 +26,8 @@ from roszen.parameters import runtime
 
 from . import conversions as cv
 from . import local_planner, multi_robot, planner, trajectory
-from .boxes import OutsideSafeSet
-from .planner import INVALID_COMMAND, PLAN_FAILED, SUCCESS, VIOLATES_KEEP_IN, PlanError
+from .errors import OutsideSafeSet, PlanError
+from .planner import INVALID_COMMAND, PLAN_FAILED, SUCCESS, VIOLATES_KEEP_IN
 
 
 class PlannerNode:

@@ -134,7 +134,7 @@ def test_unreachable_goal_is_plan_failed():
 
 def test_boundary_velocity():
     """Given non-zero boundary velocities, the spline starts and ends with them."""
-    from astrobee_planning.global_planner import plan_position
+    from astrobee_planning.position_planner import plan_position
     v0, v1 = np.array([0.05, 0.0, 0.0]), np.array([0.0, -0.05, 0.0])
     pp = plan_position(WPS["us_lab"], WPS["jem"], 0.2, 0.0175, v0=v0, v1=v1)
     v = pp.spline.evaluate([0.0, pp.spline.duration], 1)
@@ -213,7 +213,8 @@ def test_banded_solver_matches_clarabel(a, b, safe):
     """The banded interior-point solve of the spline QP gives Clarabel's optimum (objective
     within 1e-8, equalities to 1e-9, inside the boxes) for the same durations."""
     import scipy.sparse as sp
-    from astrobee_planning import global_planner as gp
+    from astrobee_planning import position_planner as gp
+    from astrobee_planning import spline_qp as qp
     start, goal = WPS[a], WPS[b]
     route = safe.route(start, goal)
     rb = safe.boxes[route]
@@ -222,8 +223,8 @@ def test_banded_solver_matches_clarabel(a, b, safe):
                                               0.2 * gp.DV_FRACTION, gp.MAX_LEG)
     rb = rb[leg_of]
     bc = np.stack([start, np.zeros(3), np.zeros(3), goal, np.zeros(3), np.zeros(3)], axis=1)
-    banded = gp.SplineQP(rb[:, :3], rb[:, 3:], gp.DEGREE, gp.CONTINUITY, track, gp.TRACK_WEIGHT)
-    ref = gp.SplineQP(rb[:, :3], rb[:, 3:], gp.DEGREE, gp.CONTINUITY, track, gp.TRACK_WEIGHT)
+    banded = qp.SplineQP(rb[:, :3], rb[:, 3:], qp.DEGREE, qp.CONTINUITY, track, gp.TRACK_WEIGHT)
+    ref = qp.SplineQP(rb[:, :3], rb[:, 3:], qp.DEGREE, qp.CONTINUITY, track, gp.TRACK_WEIGHT)
     ref._solve_banded = lambda *args, **kw: None
     for Ts in (T, T * np.linspace(0.7, 1.6, len(T))):
         xb, xc = banded.solve(Ts, bc), ref.solve(Ts, bc)

@@ -3,7 +3,7 @@ import pytest
 
 from astrobee import config, flight_modes
 from astrobee import rotations as rot
-from astrobee_planning import multi_robot, planner
+from astrobee_planning import boxes, formation_search, multi_robot, planner
 
 OFF = np.array([0.4, 0.0, 0.0])
 PAIRS = [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2", "eu_lab"),
@@ -12,7 +12,7 @@ PAIRS = [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2
 
 def _check(f, p0, q0, p1, q1):
     fm = flight_modes.get("nominal")
-    rs = multi_robot._robot_set(multi_robot.bx.robot_radius())
+    rs = formation_search.robot_set(boxes.robot_radius())
     t = np.linspace(0.0, f.centre.trajectory.duration, 6000)
     c = f.centre.trajectory.sample(t)
     for r in f.robots:
@@ -27,7 +27,7 @@ def _check(f, p0, q0, p1, q1):
     pts = np.array([[a, b, d] for a in g for b in g for d in g]) * f.bag_half
     bp = (np.repeat(c.pos[::10], len(pts), 0)
           + rot.rotate(np.repeat(c.quat[::10], len(pts), 0), np.tile(pts, (len(c.pos[::10]), 1))))
-    assert multi_robot._in_region(bp).all()
+    assert formation_search.in_region(bp).all()
     # rigid formation: 0.8 m apart, the centre midway; ends at the requested poses at rest
     a, b = (r.sample(t[::50]) for r in f.robots)
     np.testing.assert_allclose(np.linalg.norm(a.pos - b.pos, axis=1), 0.8, atol=1e-9)

@@ -93,7 +93,7 @@ FLIGHT_ROBOT_TOL = 0.01    # m
 def flight_reference():
     """The planner's Node 2 -> JEM trajectory (position spline, slerped attitude) and the mode."""
     from astrobee_control.reference import SampledTrajectory
-    from astrobee_planning.global_planner import plan_position
+    from astrobee_planning.position_planner import plan_position
     sc = config.scenario("node2_to_jem_bag")
     mode = flight_modes.get(sc.get("flight_mode"))
     q0 = np.asarray(sc["robots"][0]["orientation"], float)
