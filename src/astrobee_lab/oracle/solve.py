@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from astrobee.task import REST_OMEGA, REST_SPEED   # the verdict's "at rest" (one owner)
 from astrobee_control import pair_model as pm
 
-REST_SPEED, REST_OMEGA = 0.01, 0.02     # m/s, rad/s: the verdict's "at rest"
 MARGIN = 0.8                             # the NLP asks for 80% of the rest thresholds
 BOX_TOL = 1e-3                           # m a point may sit outside its box and still count
 BAG_MARGIN = 0.05                        # m the bag's corners keep from the walls: flown with
