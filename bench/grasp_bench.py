@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from sim_rtf import goal_at, pd_wrench
+from sim_rtf import drag_rtf
 
 GRASPS = ("strap", "hinge", "clamp")
 REF_CPU = "9.6x per CPU s (fem_fast_bench, quiet); ~5.7x in a loaded run"
@@ -28,20 +28,7 @@ def library(grasp: str, res: int, seconds: float) -> tuple[float, float, int]:
     sim = Simulation("node2_to_jem_bag", bag_model="fem", bag_resolution=res, fem_solver="fast",
                      grasp=grasp)
     try:
-        start, q0 = sim.robot_state()[:2]
-        sim.clearance()
-        t0, c0 = time.perf_counter(), time.process_time()
-        tick = 0
-        while sim.time < seconds:
-            pos, q, v, w = sim.robot_state()
-            sim.command(pd_wrench(pos, q, v, w, goal_at(sim.time, start), q0))
-            tick += 1
-            sim.step(max(1, int(round(tick * 0.016 / sim.dt)) - sim.steps))
-            sim.bag_state()
-            sim.clearance()
-            sim.contacts()
-        return (sim.time / (time.perf_counter() - t0), sim.time / (time.process_time() - c0),
-                sim.bag.num_nodes)
+        return (*drag_rtf(sim, seconds), sim.bag.num_nodes)
     finally:
         sim.close()
 

@@ -78,26 +78,32 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def drag_rtf(sim, seconds: float) -> tuple[float, float]:
+    """(wall, CPU) real-time factor of `seconds` of the library loop while a PD law drags the
+    robot (and its bag) along a line: command, 62.5 Hz steps, bag state, clearance, contacts."""
+    start, q0 = sim.robot_state()[:2]
+    sim.clearance()                                 # one-time loads outside the timing
+    t0, c0 = time.perf_counter(), time.process_time()
+    tick = 0
+    while sim.time < seconds:
+        pos, q, v, w = sim.robot_state()
+        sim.command(pd_wrench(pos, q, v, w, goal_at(sim.time, start), q0))
+        tick += 1
+        sim.step(max(1, int(round(tick * 0.016 / sim.dt)) - sim.steps))
+        sim.bag_state()
+        sim.clearance()
+        sim.contacts()
+    return sim.time / (time.perf_counter() - t0), sim.time / (time.process_time() - c0)
+
+
 def library_rtf(model: str, res: int, seconds: float, fem_solver: str | None = None
                 ) -> tuple[float, float, int]:
     """(wall, CPU) real-time factor of the library loop and the FEM node count."""
     sim = Simulation("node2_to_jem_bag", bag_model=model, bag_resolution=res or None,
                      fem_solver=fem_solver)
     try:
-        start, q0 = sim.robot_state()[:2]
         nodes = len(sim.bag.points()) if model == "fem" else 0
-        sim.clearance()                                 # one-time loads outside the timing
-        t0, c0 = time.perf_counter(), time.process_time()
-        tick = 0
-        while sim.time < seconds:
-            pos, q, v, w = sim.robot_state()
-            sim.command(pd_wrench(pos, q, v, w, goal_at(sim.time, start), q0))
-            tick += 1
-            sim.step(max(1, int(round(tick * 0.016 / sim.dt)) - sim.steps))
-            sim.bag_state()
-            sim.clearance()
-            sim.contacts()
-        return sim.time / (time.perf_counter() - t0), sim.time / (time.process_time() - c0), nodes
+        return (*drag_rtf(sim, seconds), nodes)
     finally:
         sim.close()
 
