@@ -3,9 +3,11 @@ pair model): bumps of 2.5 / 5 / 7.5 / 10 N for 0.2 s on the bag at the study run
 time U(10, 30) s and direction (astrobee_lab.oracle.solve.bump_of_seed), seeds 0..19.
 
     python studies/oracle_feasibility.py [--seeds 20] [--first-seed 0] [--out studies/results/oracle/feasibility.csv]
-    python -c "import sys; sys.path.insert(0, 'studies'); import oracle_feasibility as o; o.table(*CSVS)"
+    python studies/oracle_feasibility.py --table      # the table over every study file
 
 Resumable: rows already in the CSV are skipped. Prints the table of docs/results/oracle.md.
+A second process writes feasibility_<letter>.csv: the files astrobee_lab.oracle.load_feasibility
+reads (a variant of the problem gets another name, e.g. feasibility_margin0.csv, and is not read).
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import time
 
 from astrobee_control import pair_model as pm
 from astrobee_lab.oracle import solve as so
+from astrobee_lab.oracle.feasibility import study_files
 
 MAGNITUDES = (2.5, 5.0, 7.5, 10.0)
 FIELDS = ["magnitude", "seed", "bump_time", "fx", "fy", "fz", "feasible", "status", "solve_time",
@@ -29,7 +32,11 @@ def main() -> None:
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--out", default="studies/results/oracle/feasibility.csv")
     ap.add_argument("--magnitudes", type=float, nargs="*", default=list(MAGNITUDES))
+    ap.add_argument("--table", action="store_true", help="only print the table of the study files")
     a = ap.parse_args()
+    if a.table:
+        table(*study_files(os.path.dirname(a.out) or "."))
+        return
     params = pm.load("fem")
     leg = so.plan_leg("node2_to_jem_bag")
     done = set()
