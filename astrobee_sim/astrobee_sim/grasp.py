@@ -109,6 +109,14 @@ def _nearest(rest: np.ndarray, handle: np.ndarray, point: np.ndarray) -> int:
     return int(handle[np.argmin(np.linalg.norm(rest[handle] - point, axis=1))])
 
 
+def _halves(rest: np.ndarray, handle: np.ndarray, centre: np.ndarray,
+            axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The handle's nodes on either side of the grasp point along the strap's long axis (the
+    nodes on the plane through it belong to neither half)."""
+    s = (rest[handle] - centre) @ axis
+    return handle[s > 1e-9], handle[s < -1e-9]
+
+
 @register
 class Strap(Grasp):
     """Ball joint at the grasp point (the handle patch's centroid tied to it) + twist spring."""
@@ -116,8 +124,7 @@ class Strap(Grasp):
 
     def fem_hold(self, rest, handle, centre, axis):
         f = self.figures
-        s = (rest[handle] - centre) @ axis
-        a, b = handle[s > 1e-9], handle[s < -1e-9]
+        a, b = _halves(rest, handle, centre, axis)
         twist = (a, b) if len(a) and len(b) and f.twist_stiffness + f.twist_damping > 0 else None
         return FemHold(np.zeros(0, int), 0.0, 0.0, [np.asarray(handle)], f.stiffness, f.damping,
                        twist, f.twist_stiffness, f.twist_damping)
@@ -137,8 +144,7 @@ class Hinge(Grasp):
 
     def fem_hold(self, rest, handle, centre, axis):
         f = self.figures
-        s = (rest[handle] - centre) @ axis
-        groups = [handle[s > 1e-9], handle[s < -1e-9]]
+        groups = list(_halves(rest, handle, centre, axis))
         if not all(len(g) for g in groups):           # a handle one node long: a ball joint
             groups = [np.asarray(handle)]
         return FemHold(np.zeros(0, int), 0.0, 0.0, groups, f.stiffness / len(groups),
