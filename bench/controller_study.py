@@ -34,8 +34,8 @@ def quick_source(source: dict) -> dict:
 def main(argv: list[str] | None = None) -> int:
     import yaml
 
-    from astrobee_lab.study import run_study
-    from astrobee_lab.study_spec import StudyError, load_study, parse_study
+    from astrobee_lab.study.run import run_study
+    from astrobee_lab.study.spec import StudyError, load_study, parse_study
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--full", action="store_true", help="the whole study (default: 2 flights)")
     p.add_argument("--workers", type=int, default=None, help="local processes (default: every core)")

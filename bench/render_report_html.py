@@ -53,7 +53,7 @@ def install_browser() -> str | None:
 
 def smoke_report(folder: Path) -> Path:
     """The report.html of studies/smoke.yaml flown into `folder`."""
-    r = subprocess.run([sys.executable, "-m", "astrobee_lab.study_cli", "run",
+    r = subprocess.run([sys.executable, "-m", "astrobee_lab.study.cli", "run",
                         str(ROOT / "studies" / "smoke.yaml"), "--out", str(folder),
                         "--workers", "1", "--quiet"], capture_output=True, text=True, timeout=900)
     if r.returncode != 0:

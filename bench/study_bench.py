@@ -31,7 +31,7 @@ def study_file(folder: Path, flights: int) -> Path:
 
 
 def measure(path: Path, out: Path, **kw) -> tuple[float, list[dict]]:
-    from astrobee_lab.study import read_table, run_study
+    from astrobee_lab.study.run import read_table, run_study
     if out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()

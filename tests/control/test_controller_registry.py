@@ -75,7 +75,7 @@ def test_a_third_law_appears_everywhere(third_law, tmp_path):
     from astrobee_bringup.launch import cargo_transport
     from astrobee_bringup.launcher import LaunchContext, Launcher, find_config_dir
     from astrobee_lab.flight import make_controller
-    from astrobee_lab.study_spec import StudyError, parse_study
+    from astrobee_lab.study.spec import StudyError, parse_study
 
     assert "third" in registry.names()
     # the launcher: a choice, run by the generic controller_node under its own node name

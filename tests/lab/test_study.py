@@ -14,9 +14,9 @@ import pytest
 import yaml
 
 from astrobee_control import registry
-from astrobee_lab import study_cli
-from astrobee_lab.study import read_table, run_study, table_without_costs
-from astrobee_lab.study_spec import StudyError, load_study
+from astrobee_lab.study import cli as study_cli
+from astrobee_lab.study.run import read_table, run_study, table_without_costs
+from astrobee_lab.study.spec import StudyError, load_study
 
 pytest.importorskip("pybullet")
 
@@ -74,7 +74,7 @@ def test_a_killed_study_resumes_and_never_flies_a_finished_flight_twice(tmp_path
     path = write(tmp_path, data)
     out = tmp_path / "study"
     flights = out / "flights"
-    proc = subprocess.Popen([sys.executable, "-m", "astrobee_lab.study_cli", "run", str(path),
+    proc = subprocess.Popen([sys.executable, "-m", "astrobee_lab.study.cli", "run", str(path),
                              "--out", str(out), "--workers", "2", "--quiet"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
@@ -179,7 +179,7 @@ def test_ray_gives_the_same_table(tmp_path):
 @pytest.mark.graph
 @pytest.mark.slow
 def test_a_row_reflown_through_the_graph_matches_its_study_row(tmp_path):
-    from astrobee_lab.study_reflow import reflow
+    from astrobee_lab.study.reflow import reflow
     data = dict(SMALL, seeds=[1], grid={"controller": ["pd"]})
     run = run_study(write(tmp_path, data), tmp_path / "study", workers=1, progress=False)
     assert run.flown == 1
@@ -215,8 +215,8 @@ def _made_up_rows(study) -> list[dict]:
 def test_the_report_states_intervals_pairs_and_is_one_html_page(tmp_path):
     from html.parser import HTMLParser
 
-    from astrobee_lab.study_report import write_report
-    from astrobee_lab.study_stats import paired, wilson
+    from astrobee_lab.study.report import write_report
+    from astrobee_lab.study.stats import paired, wilson
     study = load_study(write(tmp_path, SWEPT))
     md = write_report(study, _made_up_rows(study), tmp_path).read_text()
     lo, hi = wilson(3, 3)

@@ -3,7 +3,7 @@ contacts, clearance, relative speed, tracking error, compute, wall time per cont
 value), paired per-seed comparisons of the controllers (McNemar's exact p) and plots (success
 rate with its interval vs each numeric swept knob per controller, minimum bag clearance per
 controller), written to the study folder as report.md + plots/*.png and as one self-contained
-report.html (the same tables, the plots inline: study_html).
+report.html (the same tables, the plots inline: html).
 
 Axis and column labels come from the study file's `labels:` (swept knob -> what a reader should
 read, units included: `realism.disturbances.0.magnitude: bump on the bag (N)`); a knob without
@@ -18,7 +18,7 @@ from itertools import combinations
 from pathlib import Path
 from typing import Any
 
-from .study_stats import paired, wilson
+from .stats import paired, wilson
 
 # (column, header, how to aggregate, format)
 SUMMARY = (
@@ -306,7 +306,7 @@ def build(study: Any, rows: list[dict], folder: Path) -> Doc:
 def write_report(study: Any, rows: list[dict], folder: str | Path) -> Path:
     """report.md (+ plots/) and report.html (self-contained) of the study's finished rows;
     returns report.md's path."""
-    from .study_html import to_html
+    from .html import to_html
     folder = Path(folder)
     doc = build(study, rows, folder)
     path = folder / "report.md"

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from .study_spec import OVERRIDES, FlightSpec, Study, StudyError, build_scenario, load_study
+from .spec import OVERRIDES, FlightSpec, Study, StudyError, build_scenario, load_study
 
 # columns of the table that measure the machine, not the flight (differ run to run)
 COST_COLUMNS = ("wall_time", "real_time_factor", "compute_ms_median", "compute_ms_p99",
@@ -38,7 +38,7 @@ def fly(spec: dict) -> dict:
     """Fly one flight of a study (its spec) and return its record: row, status, host. Errors
     in the flight are recorded (status 'error'), not raised, so that one bad flight does not
     stop a study."""
-    from .flight import Flight
+    from ..flight import Flight
     t0 = time.perf_counter()
     record: dict[str, Any] = {"spec": spec, "host": socket.gethostname(), "pid": os.getpid()}
     try:
@@ -394,7 +394,7 @@ def run_study(study: Study | str | Path, folder: str | Path | None = None, *,
         table = store.write_table(study, done)
     rep = None
     if report:
-        from .study_report import write_report
+        from .report import write_report
         rep = write_report(study, store.table(study, done), folder)
     return StudyRun(folder, len(todo), resumed, errors, table, rep)
 

@@ -12,12 +12,12 @@ import os
 import sys
 from pathlib import Path
 
-from .study_spec import StudyError
+from .spec import StudyError
 
 
 def _run(a: argparse.Namespace) -> int:
-    from .study import run_study
-    from .study_spec import load_study
+    from .run import run_study
+    from .spec import load_study
     study = load_study(a.file)
     if a.list:
         for f in study.flights:
@@ -33,9 +33,9 @@ def _run(a: argparse.Namespace) -> int:
 
 
 def _report(a: argparse.Namespace) -> int:
-    from .study import StudyStore
-    from .study_report import write_report
-    from .study_spec import load_study
+    from .run import StudyStore
+    from .report import write_report
+    from .spec import load_study
     folder = Path(a.dir)
     if not (folder / "study.yaml").is_file():
         raise StudyError(f"{folder} is not a study folder (no study.yaml)")
@@ -48,7 +48,7 @@ def _report(a: argparse.Namespace) -> int:
 
 
 def _reflow(a: argparse.Namespace) -> int:
-    from .study_reflow import reflow
+    from .reflow import reflow
     result = reflow(a.dir, a.row, port=a.port, timeout=a.timeout, video=a.video)
     print(result.text())
     return 0 if result.agrees else 3

@@ -1,4 +1,4 @@
-"""A study report as one self-contained HTML page: the same parts as report.md (study_report's
+"""A study report as one self-contained HTML page: the same parts as report.md (report's
 Doc), tables as HTML tables, plots inline as base64 PNG data URIs (no file beside it needed; a
 browser opens it offline), a little CSS for legible tables, and one inline line of script that reports on the console any
 plot the browser could not decode (what a headless check of the page looks for)."""
@@ -31,7 +31,7 @@ def _image(path: Any) -> str:
 
 
 def to_html(doc: Any, title: str) -> str:
-    """The page of a study_report.Doc."""
+    """The page of a report.Doc."""
     e = html.escape
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
            f"<title>{e(title)}</title>", f"<style>{STYLE}</style>", "</head>", "<body>"]

@@ -26,7 +26,7 @@ from typing import Any
 
 import yaml
 
-from .study_spec import StudyError, build_scenario, load_study
+from .spec import StudyError, build_scenario, load_study
 
 # metric -> (absolute tolerance, relative tolerance): |graph - row| <= abs + rel * |row|
 TOLERANCES = {
@@ -109,7 +109,7 @@ def judge_recording(spec: dict, leg: dict, bag: Path) -> dict | None:
     if not bag.is_dir():
         return None
     from astrobee.task import Task
-    from .recorded import judge_bag
+    from ..recorded import judge_bag
     sc = build_scenario(spec)
     pd = leg.get("plan_duration")
     kw = {"time_limit": spec["time_limit"]} if spec.get("time_limit") else {}
@@ -122,7 +122,7 @@ def judge_recording(spec: dict, leg: dict, bag: Path) -> dict | None:
 def find_row(folder: Path, which: str) -> tuple[Any, dict, dict]:
     """(FlightSpec, row, record) of a study folder's row: an index of results.csv / the study's
     order, or a flight key (a unique prefix)."""
-    from .study import StudyStore
+    from .run import StudyStore
     if not (folder / "study.yaml").is_file():
         raise StudyError(f"{folder} is not a study folder (no study.yaml)")
     study = load_study(folder / "study.yaml")
@@ -141,7 +141,7 @@ def find_row(folder: Path, which: str) -> tuple[Any, dict, dict]:
     rec = done.get(f.key)
     if rec is None:
         raise StudyError(f"row {which} ({f.key}) has not been flown yet")
-    from .study import make_row
+    from .run import make_row
     return f, make_row(f, rec), rec
 
 
