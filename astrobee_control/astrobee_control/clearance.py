@@ -4,7 +4,7 @@ Positive inside the union (distance to its boundary, lower bound), negative outs
 to the nearest box). For one box the signed distance is exact; for the union the maximum over
 boxes is a lower bound inside it, too pessimistic only where two boxes meet face to face (a
 point on a hatch plane would read 0). So the union is augmented with each touching pair's
-passage box (astrobee_planning.boxes.passage_boxes, which the planner's safe set uses too),
+passage box (astrobee.station.passage_boxes, which the planner's safe set uses too),
 which restores the true clearance through every hatch.
 
 `KeepIn.clearance` first drops the boxes farther than `reach` from the points' bounding box:
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from astrobee_planning.boxes import passage_boxes
+from astrobee.station import passage_boxes
 
 
 class KeepIn:

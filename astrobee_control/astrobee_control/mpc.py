@@ -7,7 +7,7 @@ Every `replan_period` seconds while a segment is being followed:
    are drawn around zero, half around the warm start). Perturbations shrink to zero as t_h
    reaches the segment's end, so the goal is never moved;
 2. turn each target into a candidate reference from the current state with the batched local
-   planner (astrobee_planning.local_planner.control_points: one quintic per candidate);
+   planner's quintic (astrobee.bezier.control_points: one per candidate);
 3. roll every candidate out with the PD law on a rollout model (reduced_model.RolloutModel:
    model A closed-form, or the pybullet model B) for the whole horizon, all N at once;
 4. score each (tracking error to the nominal, clearance of robot AND bag corners to the keep-in
@@ -30,7 +30,7 @@ import numpy as np
 
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
-from astrobee_planning.local_planner import control_points
+from astrobee.bezier import control_points
 
 from .attitude_recovery import (RECOVERY_TIMES, AttitudePlan, attitude_candidates,  # noqa: F401
                                 recovery_profile, shortest_recovery)

@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from astrobee import rotations as rot
-from astrobee_planning.local_planner import control_points
+from astrobee.bezier import control_points
 
 from .attitude_recovery import AttitudePlan, attitude_candidates
 from .mpc_config import Decision

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from astrobee_planning import bezier
+from astrobee import bezier
 
 from .reference import SampledTrajectory
 

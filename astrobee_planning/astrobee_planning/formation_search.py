@@ -11,7 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from astrobee import config
+from astrobee import config, station
 from astrobee import rotations as rot
 
 from . import boxes as bx
@@ -47,8 +47,9 @@ def _hatch_labels() -> list[tuple[str, np.ndarray]]:
 @lru_cache(maxsize=None)
 def keep_in_region() -> np.ndarray:
     """Boxes whose union is the keep-in set: keep-in, passage and tube boxes."""
-    raw = bx.keep_in_boxes()
-    return bx.drop_contained(np.vstack([raw, bx.passage_boxes(raw), bx.tube_boxes(raw)]))
+    raw = config.keep_in_boxes()
+    tubes = station.merged_chains(raw, rounds=3, min_cross=0.1, length_tol=1e-9)
+    return station.drop_contained(np.vstack([raw, station.passage_boxes(raw), tubes]), tol=1e-12)
 
 
 @lru_cache(maxsize=None)
@@ -59,9 +60,9 @@ def robot_set(radius: float) -> bx.SafeSet:
 
 @lru_cache(maxsize=64)
 def _shrunk(margin: tuple) -> bx.SafeSet:
-    s = bx.shrink(keep_in_region(), np.array(margin))
-    s = s[np.all(bx.extent_rows(s) > 0.0, axis=1)]
-    return bx.SafeSet(bx.drop_contained(s), np.array(margin))
+    s = station.shrink(keep_in_region(), np.array(margin))
+    s = s[np.all(station.extent(s) > 0.0, axis=1)]
+    return bx.SafeSet(station.drop_contained(s, tol=1e-12), np.array(margin))
 
 
 def in_region(pts: np.ndarray) -> np.ndarray:
@@ -186,7 +187,7 @@ def search(form: Formation, lim: Limits, p0, q0, p1, q1, forbidden: set):
         i, b = node
         s = form.sets[form.cls[i]]
         box = s.boxes[b]
-        if bx.contains(box, p1):
+        if station.contains(box, p1):
             th = angle(ROT_QUATS[i], q1)
             if i in goal_rot or (("goal", i) not in forbidden and th <= 2.1):
                 extra = 0.0 if i in goal_rot else lim.turn_time(th) + restart
@@ -225,10 +226,10 @@ def narrow_hatch(form: Formation, p0, p1) -> str:
         return "no route joins start and goal even for one robot"
     best_cross = {}
     for name, h in _hatch_labels():
-        on_route = any(np.all(bx.extent(bx.intersect(h, r)) > 0) for r in route)
+        on_route = any(np.all(station.extent(station.intersect(h, r)) > 0) for r in route)
         if not on_route:
             continue
-        e = bx.extent(h)
+        e = station.extent(h)
         fits = False
         for ax in range(3):      # the formation passes along ax
             oth = [k for k in range(3) if k != ax]

@@ -3,8 +3,7 @@
 Position: with position, velocity and acceleration given at both ends, the minimum-integrated-
 squared-jerk curve is the quintic, i.e. a degree-5 Bezier whose six control points are fixed by
 the boundary values (closed form, no solve; a degree-7 curve with free interior points would
-reduce to the same quintic):
-    P0 = p0, P1 = p0 + v0 T/5, P2 = p0 + 2 v0 T/5 + a0 T^2/20   (and mirrored at the end).
+reduce to the same quintic): astrobee.bezier.control_points.
 Attitude: the quintic quaternion polynomial of quaternion_poly (world-frame rates).
 `plan_batch` does N plans at once (vectorised) for the sampling MPC.
 Requests from outside go through `plan_within_limits` (bounded duration, start, goal and path
@@ -14,10 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from astrobee import config, flight_modes
+from astrobee import bezier, config, flight_modes
 from astrobee import rotations as rot
 
-from . import bezier
 from .errors import OutsideSafeSet
 from .quaternion_poly import _H, QuaternionPolynomial
 from .trajectory import BezierPiece, Trajectory
@@ -32,17 +30,6 @@ CHECK_SAMPLES = 200       # samples of a local plan checked against the limits a
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return rot.multiply(a, b)
-
-
-def control_points(p0, v0, a0, p1, v1, a1, duration) -> np.ndarray:
-    """Quintic Bezier control points (..., 6, 3); all inputs broadcast over leading axes."""
-    T = np.asarray(duration, dtype=float)[..., None]
-    p0, v0, a0, p1, v1, a1 = (np.asarray(x, dtype=float) for x in (p0, v0, a0, p1, v1, a1))
-    P1 = p0 + v0 * T / 5.0
-    P2 = p0 + 2.0 * v0 * T / 5.0 + a0 * T * T / 20.0
-    P4 = p1 - v1 * T / 5.0
-    P3 = p1 - 2.0 * v1 * T / 5.0 + a1 * T * T / 20.0
-    return np.stack(np.broadcast_arrays(p0, P1, P2, P3, P4, p1), axis=-2)
 
 
 def quaternion_coefficients(q0, w0, al0, q1, w1, al1, duration) -> np.ndarray:
@@ -202,7 +189,7 @@ def plan_within_limits(start, goal, duration: float, flight_mode: str | None = N
 def plan_batch(p0, v0, a0, q0, w0, al0, p1, v1, a1, q1, w1, al1, durations
                ) -> tuple[np.ndarray, np.ndarray]:
     """N plans at once: (control points (N, 6, 3), quaternion coefficients (N, 6, 4))."""
-    return (control_points(p0, v0, a0, p1, v1, a1, durations),
+    return (bezier.control_points(p0, v0, a0, p1, v1, a1, durations),
             quaternion_coefficients(q0, w0, al0, q1, w1, al1, durations))
 
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from astrobee import config, flight_modes
+from astrobee import config, flight_modes, station
 from astrobee import rotations as rot
 
 from . import boxes as bx
@@ -121,7 +121,7 @@ def plan_two_robots(start_centre, start_quat, goal_centre, goal_quat, offset,
         raise PlanError(planner.INVALID_FLIGHT_MODE, str(exc)) from exc
     if not mode.control_enabled or mode.hard_limit_vel <= 0:
         raise PlanError(planner.INVALID_FLIGHT_MODE, f"flight mode {mode.name!r} does not allow motion")
-    form = Formation(offset, bag_half, bx.robot_radius())
+    form = Formation(offset, bag_half, station.robot_radius())
     for p, q, name in ((p0, q0, "start"), (p1, q1, "goal")):
         why = form.safe_poses(p[None], q[None])
         if why:
@@ -346,7 +346,7 @@ def plan_formation(starts, goal, bag_pose=None, bag_size=None,
     qs = [planner.validate_quat(q, f"robot {i} start") for i, (_, q) in enumerate(starts)]
     g_p = planner.validate_point(goal[0], "goal")
     g_q = planner.validate_quat(goal[1], "goal")
-    if np.linalg.norm(ps[0] - ps[1]) < 2 * bx.robot_radius() - 1e-6:
+    if np.linalg.norm(ps[0] - ps[1]) < 2 * station.robot_radius() - 1e-6:
         raise PlanError(INVALID_COMMAND, f"robots 0 and 1 start {np.linalg.norm(ps[0] - ps[1]):.3f} m "
                                          f"apart: closer than two robot radii")
     q_c = qs[0]                                  # formation frame: the first robot's attitude

@@ -26,7 +26,8 @@ from math import comb
 
 import numpy as np
 
-from . import bezier
+from astrobee import bezier
+
 from .boxes import SafeSet, safe_set
 from .errors import PlanningError
 from .spline_qp import CONTINUITY, DEGREE, SplineQP

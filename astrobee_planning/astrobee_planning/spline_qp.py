@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import lapack
 
-from . import bezier
+from astrobee import bezier
 
 DEGREE = 7
 CONTINUITY = 3          # derivatives continuous at the joints (3: jerk)

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import bezier
+from astrobee import bezier
+
 from .quaternion_poly import (QuaternionPolynomial, rate_coefficients, rates_from_table,
                               time_coefficients_batch)
 

@@ -122,7 +122,7 @@ class Series:
             return None
         from astrobee import config
         from astrobee_control.clearance import KeepIn
-        from astrobee_planning.boxes import robot_radius
+        from astrobee.station import robot_radius
         c = KeepIn(config.keep_in_boxes()).clearance(np.asarray(self.position, float), reach=1.0)
         return float(np.min(c)) - robot_radius()
 

@@ -3,7 +3,7 @@ import itertools
 import numpy as np
 import pytest
 
-from astrobee import config
+from astrobee import config, station
 from astrobee_planning import boxes
 from conftest import module_waypoints
 
@@ -16,7 +16,7 @@ def _in_keep_in(pts, raw):
 def test_robot_ball_stays_in_keep_in_set(safe):
     """Points of every safe box, with the robot's sphere around them, lie in the keep-in union."""
     raw = config.keep_in_boxes()
-    r = boxes.robot_radius()
+    r = station.robot_radius()
     rng = np.random.default_rng(0)
     dirs = rng.normal(size=(200, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)

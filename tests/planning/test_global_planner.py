@@ -3,9 +3,9 @@ import itertools
 import numpy as np
 import pytest
 
-from astrobee import flight_modes
+from astrobee import bezier, config, flight_modes, station
 from astrobee import rotations as rot
-from astrobee_planning import bezier, boxes, planner
+from astrobee_planning import boxes, planner
 from conftest import fibonacci_sphere, module_waypoints
 
 WPS = module_waypoints()
@@ -20,8 +20,8 @@ SPHERE = np.vstack([fibonacci_sphere(60), np.eye(3), -np.eye(3)])
 def _robot_inside_keep_in(pos: np.ndarray) -> np.ndarray:
     """Per centre: every point of the robot's collision sphere (66 surface points incl. the six
     axis extremes) in some keep-in box of config/iss.yaml (the raw boxes, not the planner's set)."""
-    keep_in = boxes.keep_in_boxes()
-    pts = (pos[:, None, :] + boxes.robot_radius() * SPHERE[None]).reshape(-1, 3)
+    keep_in = config.keep_in_boxes()
+    pts = (pos[:, None, :] + station.robot_radius() * SPHERE[None]).reshape(-1, 3)
     inside = np.zeros(len(pts), dtype=bool)
     for b in keep_in:
         inside |= np.all((pts >= b[:3] - 1e-7) & (pts <= b[3:] + 1e-7), axis=1)
@@ -125,7 +125,6 @@ def test_tiny_quaternion_error_tolerated(safe):
 
 def test_unreachable_goal_is_plan_failed():
     """Two disconnected keep-in boxes: goal inside the safe set but not reachable."""
-    from astrobee_planning import boxes
     iso = boxes.safe_set(keep_in=np.array([[0, 0, 0, 2, 2, 2], [5, 5, 5, 7, 7, 7]], float))
     with pytest.raises(planner.PlanError) as exc:
         planner.plan_global([1.0, 1, 1], Q0, [6.0, 6, 6], Q1, "nominal", safe=iso)

@@ -2,15 +2,17 @@
 module waypoints of config/iss.yaml, sampled densely (<= 2 cm apart), checked two ways against
 the raw keep-in boxes (not the planner's own safe set):
 - exactly, per sample: the sphere lies inside one keep-in box, or inside the span of two
-  touching boxes through their shared opening (boxes.passage_boxes), each shrunk by the radius;
+  touching boxes through their shared opening (astrobee.station.passage_boxes), each shrunk by the radius;
 - by points: 122 points of the sphere's surface, each inside some keep-in box."""
 import itertools
 
 import numpy as np
 import pytest
 
+from astrobee import config
 from astrobee import rotations as rot
-from astrobee_planning import boxes, planner
+from astrobee.station import passage_boxes, robot_radius, shrink
+from astrobee_planning import planner
 from conftest import fibonacci_sphere, module_waypoints
 
 WPS = module_waypoints()
@@ -23,10 +25,10 @@ SURFACE = np.vstack([fibonacci_sphere(116), np.eye(3), -np.eye(3)])
 
 @pytest.fixture(scope="module")
 def station():
-    raw = boxes.keep_in_boxes()
-    r = boxes.robot_radius()
-    spans = np.vstack([raw, boxes.passage_boxes(raw)])
-    return raw, boxes.shrink(spans, r), r, planner.cached_safe_set(0.0)
+    raw = config.keep_in_boxes()
+    r = robot_radius()
+    spans = np.vstack([raw, passage_boxes(raw)])
+    return raw, shrink(spans, r), r, planner.cached_safe_set(0.0)
 
 
 def _in_any(pts: np.ndarray, bx: np.ndarray, tol: float = 1e-7) -> np.ndarray:

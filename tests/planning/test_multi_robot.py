@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from astrobee import config, flight_modes
+from astrobee import config, flight_modes, station
 from astrobee import rotations as rot
-from astrobee_planning import boxes, formation_search, multi_robot, planner
+from astrobee_planning import formation_search, multi_robot, planner
 
 OFF = np.array([0.4, 0.0, 0.0])
 PAIRS = [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2", "eu_lab"),
@@ -12,7 +12,7 @@ PAIRS = [("node_2", "jem"), ("node_1", "node_3"), ("us_lab", "node_2"), ("node_2
 
 def _check(f, p0, q0, p1, q1):
     fm = flight_modes.get("nominal")
-    rs = formation_search.robot_set(boxes.robot_radius())
+    rs = formation_search.robot_set(station.robot_radius())
     t = np.linspace(0.0, f.centre.trajectory.duration, 6000)
     c = f.centre.trajectory.sample(t)
     for r in f.robots:

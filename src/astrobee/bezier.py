@@ -4,6 +4,7 @@ A Bezier curve of degree n on [0, T] is p(t) = sum_i B_{i,n}(t/T) P_i. Its k-th 
 derivative is a Bezier curve of degree n-k whose control points are the k-th forward
 differences of P scaled by n!/(n-k)! / T^k; convex-hull arguments on those control points
 give sufficient conditions for velocity/acceleration limits and box containment.
+Shared by the planner (its splines and local plans) and the sampling MPC (its candidates).
 """
 from __future__ import annotations
 
@@ -116,3 +117,16 @@ def elevate(points: np.ndarray, degree: int) -> np.ndarray:
         mid = i * p[:-1] + (1 - i) * p[1:]
         p = np.vstack([p[:1], mid, p[-1:]])
     return p
+
+
+def control_points(p0, v0, a0, p1, v1, a1, duration) -> np.ndarray:
+    """Control points (..., 6, 3) of the quintic Bezier from (p0, v0, a0) to (p1, v1, a1) in
+    `duration` s: P0 = p0, P1 = p0 + v0 T/5, P2 = p0 + 2 v0 T/5 + a0 T^2/20, mirrored at the end
+    (the minimum-jerk curve between two full states); inputs broadcast over leading axes."""
+    T = np.asarray(duration, dtype=float)[..., None]
+    p0, v0, a0, p1, v1, a1 = (np.asarray(x, dtype=float) for x in (p0, v0, a0, p1, v1, a1))
+    P1 = p0 + v0 * T / 5.0
+    P2 = p0 + 2.0 * v0 * T / 5.0 + a0 * T * T / 20.0
+    P4 = p1 - v1 * T / 5.0
+    P3 = p1 - 2.0 * v1 * T / 5.0 + a1 * T * T / 20.0
+    return np.stack(np.broadcast_arrays(p0, P1, P2, P3, P4, p1), axis=-2)
