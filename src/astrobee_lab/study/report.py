@@ -18,7 +18,9 @@ from itertools import combinations
 from pathlib import Path
 from typing import Any
 
-from .stats import paired, wilson
+from .oracle_table import oracle_rows, oracle_setting
+from .oracle_table import load as load_oracle
+from .stats import paired, signed_rank, wilson
 
 # (column, header, how to aggregate, format)
 SUMMARY = (
@@ -26,10 +28,22 @@ SUMMARY = (
     ("success", "success 95% interval", "wilson", "{:.0%}-{:.0%}"),
     ("contacts", "flights w/ contact", "count_pos", "{:d}"),
     ("min_bag_clearance", "min bag clearance m (min / median)", "min_med", "{:.3f} / {:.3f}"),
+    ("time_to_rest", "time to rest s (median of those at rest)", "median", "{:.1f}"),
+    ("max_attitude_excursion", "largest attitude excursion rad (median / max)", "med_max",
+     "{:.2f} / {:.2f}"),
     ("peak_bag_robot_speed", "peak bag-robot speed m/s (median)", "median", "{:.3f}"),
     ("rms_position_error", "RMS tracking error mm (median)", "median_mm", "{:.1f}"),
     ("compute_ms_median", "compute per cycle ms (median / p99)", "med_p99", "{:.2f} / {:.1f}"),
     ("wall_time", "wall time s (median)", "median", "{:.1f}"),
+)
+# paired continuous metrics (Wilcoxon signed-rank over the seeds both controllers have a value
+# of): (column, header, scale, format of the median paired difference)
+CONTINUOUS = (
+    ("min_bag_clearance", "min bag clearance m", 1.0, "{:+.3f}"),
+    ("time_to_rest", "time to rest s", 1.0, "{:+.1f}"),
+    ("max_attitude_excursion", "attitude excursion rad", 1.0, "{:+.2f}"),
+    ("rms_position_error", "RMS error mm", 1e3, "{:+.1f}"),
+    ("compute_ms_median", "compute ms", 1.0, "{:+.2f}"),
 )
 
 
@@ -103,6 +117,8 @@ def aggregate(rows: list[dict]) -> dict[str, str]:
             cell = fmt.format(sum(v > 0 for v in fin))
         elif how == "min_med":
             cell = fmt.format(min(fin), _median(fin))
+        elif how == "med_max":
+            cell = fmt.format(_median(fin), max(fin))
         elif how == "med_p99":
             p99 = [_num(r.get("compute_ms_p99")) for r in rows]
             cell = fmt.format(_median(fin), _median(p99))
@@ -156,29 +172,43 @@ def block_table(rows: list[dict], swept: list[str], names: dict[str, str] | None
     return doc.markdown().rstrip("\n")
 
 
-def paired_rows(rows: list[dict], swept: list[str], names: dict[str, str] | None = None
+def paired_rows(rows: list[dict], swept: list[str], names: dict[str, str] | None = None,
+                pairs: list[tuple[str, str]] | None = None
                 ) -> tuple[list[str], list[list[str]]] | None:
-    """(headers, cells) of the paired per-seed comparisons of each two controllers at the same
-    swept values over the seeds both flew (None when no two share a seed)."""
+    """(headers, cells) of the paired per-seed comparisons of two controllers at the same swept
+    values over the seeds both flew: McNemar's exact p on success, then per continuous metric
+    the median paired difference (second - first) with Wilcoxon's signed-rank p. Every two
+    controllers, or the study's `pairs`. None when no two share a seed."""
     names = names or {}
-    by: dict[tuple, dict[str, dict[int, bool]]] = defaultdict(lambda: defaultdict(dict))
+    by: dict[tuple, dict[str, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))
     for r in rows:
         seed = r.get("seed")
         if isinstance(seed, (int, float)) and not isinstance(seed, bool):
-            by[tuple(r.get(c) for c in swept)][r["label"]][int(seed)] = _ok(r)
+            by[tuple(r.get(c) for c in swept)][r["label"]][int(seed)] = r
+    metrics = [m for m in CONTINUOUS if any(math.isfinite(_num(r.get(m[0]))) for r in rows)]
     out = []
     for values in sorted(by, key=lambda k: tuple(_key(v) for v in k)):
-        for a, b in combinations(list(by[values]), 2):
-            p = paired(a, b, by[values][a], by[values][b])
+        flown = list(by[values])
+        todo = combinations(flown, 2) if pairs is None else \
+            [(a, b) for a, b in pairs if a in flown and b in flown]
+        for a, b in todo:
+            ra, rb = by[values][a], by[values][b]
+            p = paired(a, b, {s: _ok(r) for s, r in ra.items()}, {s: _ok(r) for s, r in rb.items()})
             if p is None:
                 continue
-            out.append([*(str(v) for v in values), f"{a} vs {b}", str(p.seeds), str(p.both),
-                        f"{p.only_a} ({a})", f"{p.only_b} ({b})", str(p.neither),
-                        f"{p.p_value:.3g}"])
+            cells = [*(str(v) for v in values), f"{a} vs {b}", str(p.seeds), str(p.both),
+                     f"{p.only_a} ({a})", f"{p.only_b} ({b})", str(p.neither), f"{p.p_value:.3g}"]
+            for col, _, scale, fmt in metrics:
+                w = signed_rank({s: scale * _num(r.get(col)) for s, r in ra.items()},
+                                {s: scale * _num(r.get(col)) for s, r in rb.items()})
+                cells.append("-" if w is None else
+                             f"{fmt.format(w.median_diff)} (p {w.p_value:.2g}, n {w.n})")
+            out.append(cells)
     if not out:
         return None
     heads = [*(names.get(c, c) for c in swept), "pair", "seeds paired", "both succeed",
-             "only the first", "only the second", "neither", "McNemar exact p"]
+             "only the first", "only the second", "neither", "McNemar exact p",
+             *(f"{h}: median paired diff, second - first (Wilcoxon p, n)" for _, h, _, _ in metrics)]
     return heads, out
 
 
@@ -267,7 +297,18 @@ def build(study: Any, rows: list[dict], folder: Path) -> Doc:
                if errors else "")
             + ". Table: results.csv; per flight: flights/<key>.json. Success rates with their "
               "Wilson 95% interval; paired comparisons over the seeds both controllers flew "
-              "(McNemar's exact test on the seeds where only one succeeded).")
+              "(McNemar's exact test on the seeds where only one succeeded; Wilcoxon's "
+              "signed-rank test on the continuous metrics' paired differences).")
+    source = getattr(study, "source", None) or {}
+    pairs = [tuple(p) for p in source["pairs"]] if source.get("pairs") else None
+    oracle = oracle_setting(source)
+    answers = None
+    if oracle is not None:
+        answers, where = load_oracle(oracle[0])
+        doc.add("p", "The oracle (offline optimal control of the reduced pair model, the bump "
+                     "known in advance) as the upper bound: per condition, the seeds it finds "
+                     f"feasible and each controller's success on them; {where}.")
+    specs = {f.key: f.spec for f in study.flights}
     blocks = list(dict.fromkeys(f.block for f in study.flights))
     if len(blocks) > 1 and rows:
         doc.add("h2", "All flights, per controller")
@@ -281,10 +322,15 @@ def build(study: Any, rows: list[dict], folder: Path) -> Doc:
             doc.add("p", "(no finished flights)")
             continue
         doc.add("table", block_rows(brows, swept, names))
-        pairs = paired_rows(brows, swept, names)
-        if pairs is not None:
+        if answers is not None and (oracle[1] is None or b in oracle[1]):
+            bound = oracle_rows(brows, swept, specs, answers, names)
+            if bound is not None:
+                doc.add("h3", f"{b}: against the oracle")
+                doc.add("table", bound)
+        compared = paired_rows(brows, swept, names, pairs)
+        if compared is not None:
             doc.add("h3", f"{b}: paired per seed")
-            doc.add("table", pairs)
+            doc.add("table", compared)
         try:
             made = _plots(study.name, b, brows, swept, plots, names)
         except ImportError:

@@ -8,6 +8,9 @@
     seeds: 5                           # 0..4, or a list
     time_limit: 90                     # optional, sim s (else the Task's: plan + settle + 10 s)
     labels: {realism.disturbances.0.magnitude: bump on the bag (N)}  # report axes (optional)
+    pairs: [[pd, mpc_a]]               # paired comparisons in the report (default: every two)
+    oracle: studies/results/oracle     # the oracle's answers per (bump, seed) as a bound (optional;
+                                       #   or {results: DIR, blocks: [names]})
     metrics: [success, contacts, min_bag_clearance]   # columns kept in the table (default: all)
     blocks:                            # each block: set (fixed) x grid (product) x random draws
       - name: routes
@@ -45,7 +48,7 @@ from astrobee.overrides import OVERRIDE_KEYS, parse_overrides
 from roszen import yamltext
 
 TOP_KEYS = {"name", "description", "controllers", "base", "seeds", "time_limit", "metrics",
-            "blocks", "grid", "random", "set", "notes", "labels"}
+            "blocks", "grid", "random", "set", "notes", "labels", "pairs", "oracle"}
 BLOCK_KEYS = {"name", "set", "grid", "random", "seeds", "description"}
 # the scenario overrides a flight may set (astrobee.overrides; realism is kept apart in a spec)
 OVERRIDES = tuple(k for k in OVERRIDE_KEYS if k not in ("realism", "robots"))
@@ -371,6 +374,19 @@ def _expand_block(block: dict, bi: int, base: dict, seeds: list[int], controller
     return out
 
 
+def _check_report_settings(data: dict, controllers: dict, where: str) -> None:
+    """The report's `pairs` (label pairs to compare; default every two) and `oracle`."""
+    from .oracle_table import check_setting
+    pairs = data.get("pairs")
+    if pairs is not None and not (isinstance(pairs, list) and all(
+            isinstance(p, list) and len(p) == 2 and all(x in controllers for x in p)
+            for p in pairs)):
+        raise StudyError(f"{where}: pairs must be a list of [label, label] of the controllers "
+                         f"({', '.join(controllers)}), got {pairs!r}")
+    if data.get("oracle") is not None and (why := check_setting(data["oracle"])):
+        raise StudyError(f"{where}: {why}")
+
+
 def load_study(path: str | Path) -> Study:
     """Read and expand a study file (StudyError, one line, for anything wrong in it)."""
     p = Path(path)
@@ -401,6 +417,7 @@ def parse_study(data: Any, default_name: str = "study", where: str = "study",
     if not name.replace("_", "").replace("-", "").isalnum():
         raise StudyError(f"{where}: name must be letters, digits, '_' or '-', got {name!r}")
     controllers = _controllers(data.get("controllers"), where)
+    _check_report_settings(data, controllers, where)
     base = copy.deepcopy(_check_keys(data.get("base"), FLIGHT_KEYS, f"{where}: base"))
     for k in [k for k in base if "." in str(k)]:
         v = base.pop(k)

@@ -1,7 +1,8 @@
 """The statistics a study report states: Wilson 95% intervals on success rates (sound at the
 few seeds a study flies, unlike the normal approximation) and paired per-seed comparisons of two
 controllers flown on the same seeds (McNemar's exact test: a two-sided binomial test on the
-discordant seeds, those where exactly one of the two succeeded)."""
+discordant seeds, those where exactly one of the two succeeded; Wilcoxon's signed-rank test on a
+continuous metric's paired differences)."""
 from __future__ import annotations
 
 import math
@@ -53,3 +54,31 @@ def paired(a: str, b: str, outcome_a: dict[int, bool], outcome_b: dict[int, bool
     return Paired(a, b, len(seeds), sum(x and y for x, y in pairs),
                   sum(x and not y for x, y in pairs), sum(y and not x for x, y in pairs),
                   sum(not x and not y for x, y in pairs))
+
+
+@dataclass(frozen=True)
+class SignedRank:
+    """A continuous metric of two controllers on the seeds where both have a value: the median
+    of the paired differences (b - a) and Wilcoxon's signed-rank two-sided p."""
+
+    n: int
+    median_diff: float
+    p_value: float
+
+
+def signed_rank(a: dict[int, float], b: dict[int, float]) -> SignedRank | None:
+    """Wilcoxon's signed-rank test of b - a over the seeds both have a finite value of (seed ->
+    value); None without such a seed. Zero differences are dropped (Wilcoxon's rule); p is 1.0
+    when every difference is zero."""
+    seeds = sorted(s for s in set(a) & set(b) if math.isfinite(a[s]) and math.isfinite(b[s]))
+    if not seeds:
+        return None
+    d = [b[s] - a[s] for s in seeds]
+    ds = sorted(d)
+    n = len(ds)
+    med = ds[n // 2] if n % 2 else 0.5 * (ds[n // 2 - 1] + ds[n // 2])
+    if not any(x != 0 for x in d):
+        return SignedRank(n, med, 1.0)
+    from scipy.stats import wilcoxon
+    return SignedRank(n, med, float(wilcoxon(d, zero_method="wilcox",
+                                              alternative="two-sided").pvalue))
