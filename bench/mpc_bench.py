@@ -18,10 +18,11 @@ import numpy as np  # noqa: E402
 from astrobee import flight_modes  # noqa: E402
 from astrobee import rotations as rot  # noqa: E402
 from astrobee_control import mass as mp  # noqa: E402
+from astrobee_control.handle_models import HandleParams, identified_handles  # noqa: E402
 from astrobee_control.law import BagObservation  # noqa: E402
 from astrobee_control.mpc import MpcConfig, MpcLaw  # noqa: E402
 from astrobee_control.pd import State  # noqa: E402
-from astrobee_control.reduced_model import ReducedModel, identified_handles, HandleParams  # noqa: E402
+from astrobee_control.reduced_model import ReducedModel  # noqa: E402
 from astrobee_control.reference import rest_to_rest  # noqa: E402
 
 Q = np.array([0.0, 0.0, -0.7071067811865476, 0.7071067811865476])

@@ -36,12 +36,13 @@ from .attitude_recovery import (RECOVERY_TIMES, AttitudePlan, attitude_candidate
                                 recovery_profile, shortest_recovery)
 from .clearance import KeepIn
 from .law import BagObservation, Step
+from .handle_models import identified_handles, rotate_by
 from .mass import MassProperties
 from .mpc_attitude import AttitudeMode
 from .mpc_config import MODELS, Decision, MpcConfig
 from .mpc_paths import bezier_states, interp_quat, joined
 from .pd import State
-from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStart, rotate_by
+from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStart
 from .reference import SampledTrajectory
 from .registry import Controller
 from .tracking import CONTROLLING, SETTLE_TIME, PdLaw, check_settle_time
@@ -300,7 +301,7 @@ def make_rollout_model(params: dict) -> RolloutModel:
     params = {**PARAMETERS, **params}
     model = str(params["model"])
     if model == "reduced":
-        from .reduced_model import ReducedModel, identified_handles
+        from .reduced_model import ReducedModel
         handles = identified_handles()
         name = str(params["handle"])
         if name not in handles:

@@ -25,7 +25,7 @@ clipped per body axis), without the small integral terms. Everything is vectoris
 candidates: one step is a dozen numpy operations on (N, 3) / (N, 3, 3) arrays.
 
 The handle models and `simulate_bag` / `simulate_pendulum` (what the system identification,
-sysid.py, fits) live in handle_models.py; they stay importable from here.
+sysid.py, fits) live in handle_models.py.
 """
 from __future__ import annotations
 
@@ -34,9 +34,7 @@ from typing import Protocol
 
 import numpy as np
 
-from .handle_models import (HandleParams, PendulumParams, RigidBodyParams,  # noqa: F401
-                            handle_from_dict, identified_handles, rotate_by, simulate_bag,
-                            simulate_pendulum, simulate_pendulums, swing_from_offset)
+from .handle_models import HandleParams, PendulumParams, RigidBodyParams, rotate_by, swing_from_offset
 
 
 ATTITUDE_STEP = 0.2   # s, the turning rollout's attitude step (its dynamics are slow: torque-limited)

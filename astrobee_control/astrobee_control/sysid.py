@@ -7,7 +7,7 @@ Procedure (bench/sysid_bag.py runs it for every bag model and writes config/redu
    the bag model of a simulator swings behind it; robot and bag states are sampled at 62.5 Hz.
    The simulator is duck-typed (astrobee_sim.Simulation: command/advance/robot_state/bag_state/
    time/flight_mode), so this module never imports it.
-2. `fit`: the robot's recorded motion drives the spring-damper alone (reduced_model.simulate_bag);
+2. `fit`: the robot's recorded motion drives the spring-damper alone (handle_models.simulate_bag);
    least squares over log-stiffness, log-damping (3 body axes each) and the rest offset
    minimises the bag-centre position error.
 3. `error`: the same prediction on a held-out motion (another seed) gives the identification
@@ -26,12 +26,12 @@ import numpy as np
 
 from astrobee import rotations as rot
 
-from .mass import MassProperties, with_bag
-from .pd import State
-from .mass import robot as robot_mass
-from .reduced_model import (CandidateReferences, Gains, HandleParams, PendulumParams,
-                            ReducedModel, RigidBodyParams, RolloutStart, simulate_bag,
+from .handle_models import (HandleParams, PendulumParams, RigidBodyParams, simulate_bag,
                             simulate_pendulum, simulate_pendulums)
+from .mass import MassProperties, with_bag
+from .mass import robot as robot_mass
+from .pd import State
+from .reduced_model import CandidateReferences, Gains, ReducedModel, RolloutStart
 from .reference import rest_to_rest
 from .tracking import Tracker
 
@@ -161,7 +161,7 @@ def _fit_from(recordings: list[Recording], k0: float, c0: float,
 
 def fit_pendulum(recordings: list[Recording], lever_length: float = 0.25,
                  starts=((3.0, 0.5), (30.0, 3.0))) -> PendulumParams:
-    """Least-squares pendulum parameters (reduced_model.PendulumParams) over recordings: log
+    """Least-squares pendulum parameters (handle_models.PendulumParams) over recordings: log
     rotational stiffness and damping per body axis, rest offset, lever (hinge -> centre) and
     log inertia per body axis; one solve per (stiffness, damping) start, the best kept. The
     Jacobian's finite differences run batched (simulate_pendulums)."""

@@ -38,6 +38,7 @@ def launch_main(argv: list[str]) -> int:
 
 def _launch(argv: list[str]) -> int:
     from astrobee_bringup import launcher
+    from astrobee_bringup.process_group import LaunchError
 
     from roszen.cli.common import Parser     # a bad option is one line, not a usage dump
     p = Parser(prog="astrobee launch", description="Start a launch description's nodes.")
@@ -72,7 +73,7 @@ def _launch(argv: list[str]) -> int:
     if a.show_args:
         try:
             print(launcher.format_arguments(a.name), end="")
-        except launcher.LaunchError as exc:
+        except LaunchError as exc:
             raise CliError(str(exc)) from None
         return 0
     arguments = {}
@@ -93,7 +94,7 @@ def _launch(argv: list[str]) -> int:
                                run_dir=Path(a.run_dir) if a.run_dir else None, 
                                sigint_timeout=a.sigint_timeout,
                                sigterm_timeout=a.sigterm_timeout, stop_grace=a.stop_grace)
-    except launcher.LaunchError as exc:
+    except LaunchError as exc:
         raise CliError(str(exc)) from None
 
 

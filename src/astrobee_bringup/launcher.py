@@ -214,5 +214,5 @@ def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: P
     return status
 
 
-__all__ = ["NodeSpec", "LaunchContext", "Launcher", "LaunchError", "launch", "ros2_available",
-           "write_params_file", "flatten_params", "load_description", "list_descriptions"]
+__all__ = ["LaunchContext", "launch", "ros2_available", "write_params_file", "flatten_params",
+           "load_description", "list_descriptions"]

@@ -3,7 +3,8 @@ import pytest
 
 from astrobee.scenario import Scenario
 from astrobee_bringup.launch import cargo_transport
-from astrobee_bringup.launcher import LaunchContext, LaunchError, find_config_dir
+from astrobee_bringup.launcher import LaunchContext, find_config_dir
+from astrobee_bringup.process_group import LaunchError
 
 
 def nodes(tmp_path, **args):

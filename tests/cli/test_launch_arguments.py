@@ -11,7 +11,7 @@ import yaml
 
 from conftest import ASTROBEE
 
-from astrobee_bringup import launcher
+from astrobee_bringup import launcher, process_group
 from astrobee_bringup.cli import launch_main
 from astrobee_bringup.launch import cargo_transport
 
@@ -40,7 +40,7 @@ def no_start(monkeypatch):
     """Any process start fails the test: the arguments must be refused before."""
     def started(*_a, **_k):
         raise AssertionError("a process was started")
-    monkeypatch.setattr(launcher.Launcher, "run", started)
+    monkeypatch.setattr(process_group.Launcher, "run", started)
     monkeypatch.setattr(subprocess, "Popen", started)
 
 
@@ -83,7 +83,7 @@ def test_numbers_reach_sim_node_as_yaml_floats(tmp_path):
                                   "record": "false", "mission": "false"},
                                  launcher.find_config_dir(), tmp_path / "run", False, 1)
     sim = next(s for s in cargo_transport.generate_nodes(ctx) if s.name == "sim_node")
-    argv = launcher.Launcher([sim], use_ros2=False, port=1, run_dir=tmp_path).argv_for(sim)
+    argv = process_group.Launcher([sim], use_ros2=False, port=1, run_dir=tmp_path).argv_for(sim)
     given = dict(argv[i + 1].split(":=", 1) for i, a in enumerate(argv) if a == "-p")
     assert yaml.safe_load(given["lockstep_timeout"]) == 1e-5
     assert yaml.safe_load(given["seed"]) == 2**63 - 1

@@ -45,7 +45,7 @@ def test_node_that_cannot_start_ends_the_launch_with_one_line(procs, port, tmp_p
 
 
 SIM_ONLY = """
-from astrobee_bringup.launcher import NodeSpec
+from astrobee_bringup.process_group import NodeSpec
 def generate_nodes(ctx):
     return [NodeSpec("router", kind="router", command=["router", "--port", str(ctx.port)]),
             NodeSpec("sim_node", "astrobee_sim", "sim_node", parameters=[
@@ -163,7 +163,7 @@ def test_killed_node_is_the_cause_without_stale_lines(tmp_path):
     import io
     import threading
 
-    from astrobee_bringup.launcher import Launcher, NodeSpec
+    from astrobee_bringup.process_group import Launcher, NodeSpec
     code = ("import time\nprint('[WARN] position error 0.2 m', flush=True)\nprint('up', flush=True)\n"
             "while True: time.sleep(0.05)")
     specs = [NodeSpec("victim", argv=[sys.executable, "-c", code]),

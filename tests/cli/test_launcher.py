@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from astrobee_bringup.launcher import Launcher, LaunchError, NodeSpec
+from astrobee_bringup.process_group import Launcher, LaunchError, NodeSpec
 from conftest import ASTROBEE, HERE, graph_env, pid_alive
 
 FAKE = str(HERE / "launch_files" / "fake_graph.py")

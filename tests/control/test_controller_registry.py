@@ -73,7 +73,8 @@ def test_the_installed_laws_are_registered():
 def test_a_third_law_appears_everywhere(third_law, tmp_path):
     from astrobee import flight_modes
     from astrobee_bringup.launch import cargo_transport
-    from astrobee_bringup.launcher import LaunchContext, Launcher, find_config_dir
+    from astrobee_bringup.launcher import LaunchContext, find_config_dir
+    from astrobee_bringup.process_group import Launcher
     from astrobee_lab.flight import make_controller
     from astrobee_lab.study.spec import StudyError, parse_study
 

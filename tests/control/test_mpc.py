@@ -8,12 +8,12 @@ from astrobee import flight_modes
 from astrobee import rotations as rot
 from astrobee_control import mass as mp
 from astrobee_control import sysid
+from astrobee_control.handle_models import HandleParams, RigidBodyParams, identified_handles
 from astrobee_control.law import BagObservation, ControlLaw
 from astrobee_control.mpc import MpcConfig, MpcLaw
 from astrobee_control.mpc_controller_node import make_mpc_law
 from astrobee_control.pd import State
-from astrobee_control.reduced_model import (HandleParams, ReducedModel, RigidBodyParams,
-                                            identified_handles)
+from astrobee_control.reduced_model import ReducedModel
 from astrobee_control.reference import rest_to_rest
 from astrobee_control.tracking import CONTROLLING
 

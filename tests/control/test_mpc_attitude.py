@@ -12,8 +12,8 @@ from astrobee_control.law import BagObservation
 from astrobee_control.mpc import (MpcConfig, MpcLaw, attitude_candidates, recovery_profile,
                                   shortest_recovery)
 from astrobee_control.pd import State
-from astrobee_control.reduced_model import (ReducedModel, RigidBodyParams, Rollouts,
-                                            RolloutStart, compound_inertia)
+from astrobee_control.handle_models import RigidBodyParams
+from astrobee_control.reduced_model import ReducedModel, Rollouts, RolloutStart, compound_inertia
 from astrobee_control.reference import rest_to_rest
 from astrobee_control.tracking import CONTROLLING
 

@@ -8,8 +8,8 @@ import pytest
 from astrobee import config, flight_modes
 from astrobee_control import mass as mp
 from astrobee_control import sysid
-from astrobee_control.reduced_model import (ReducedModel, RigidBodyParams, identified_handles,
-                                            rotate_by)
+from astrobee_control.handle_models import RigidBodyParams, identified_handles, rotate_by
+from astrobee_control.reduced_model import ReducedModel
 
 
 @pytest.fixture(scope="module")

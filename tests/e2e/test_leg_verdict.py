@@ -137,7 +137,8 @@ def test_launch_starts_a_controller_and_filter_per_robot_in_its_namespace(tmp_pa
     import pytest
 
     from astrobee_bringup.launch import cargo_transport
-    from astrobee_bringup.launcher import LaunchContext, LaunchError, Launcher, find_config_dir
+    from astrobee_bringup.launcher import LaunchContext, find_config_dir
+    from astrobee_bringup.process_group import LaunchError, Launcher
     ctx = LaunchContext({"scenario": "two_robots_bag", "safety": "node", "controller": "mpc"},
                         find_config_dir(), tmp_path, False, 7447)
     specs = {s.name: s for s in cargo_transport.generate_nodes(ctx)}

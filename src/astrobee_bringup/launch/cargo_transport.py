@@ -45,7 +45,8 @@ from astrobee.config import load_yaml
 from astrobee.overrides import (BAG_MODELS, FEM_SOLVERS, NO_BAG, OVERRIDE_KEYS, Overrides,
                                 parse_overrides)
 from astrobee.scenario import Scenario, ScenarioError
-from astrobee_bringup.launcher import LaunchContext, NodeSpec, LaunchError, flatten_params, write_params_file
+from astrobee_bringup.launcher import LaunchContext, flatten_params, write_params_file
+from astrobee_bringup.process_group import LaunchError, NodeSpec
 from astrobee_control import registry
 
 

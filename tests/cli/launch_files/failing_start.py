@@ -3,7 +3,7 @@ writes an "interrupted" summary.json when stopped, and a node that cannot start 
 error line, exits 1) once `bad:=true`."""
 import sys
 
-from astrobee_bringup.launcher import NodeSpec
+from astrobee_bringup.process_group import NodeSpec
 
 ARGUMENTS = {
     "bad": ("true", "true: the node 'broken' fails at start"),

@@ -9,7 +9,7 @@ Launch argument `nodes`: comma-separated behaviours, each one of
 """
 import sys
 
-from astrobee_bringup.launcher import NodeSpec
+from astrobee_bringup.process_group import NodeSpec
 
 CODE = {
     "sleep": "import time\nprint('ready', flush=True)\nwhile True: time.sleep(0.05)",

@@ -1,6 +1,6 @@
 """Test launch description: one node by package/executable, plus the router, to see which
 command lines the launcher uses when a ROS 2 install with rmw_zenoh is detected."""
-from astrobee_bringup.launcher import NodeSpec
+from astrobee_bringup.process_group import NodeSpec
 
 
 def generate_nodes(ctx):
