@@ -15,6 +15,7 @@ import numpy as np
 import yaml
 
 from . import config, flight_modes
+from . import rotations as rot
 from .errors import ScenarioError
 from .overrides import (BAG_MODELS, FEM_SOLVERS, MASS_RANGE, MAX_ROBOTS, NO_BAG,  # noqa: F401
                         OVERRIDE_KEYS, RESOLUTION_RANGE, Overrides, bag_variants,
@@ -237,6 +238,19 @@ class Scenario:
                                base.orientation)
                      for i, n in enumerate(ov.robots)]
             sc = replace(sc, robots=tuple(specs))
+        return sc
+
+    def with_start_goal(self, start: tuple | None = None, goal: tuple | None = None) -> "Scenario":
+        """The scenario with its (first) robot's start pose and/or its goal pose replaced
+        ((position, orientation) pairs; the orientation normalised)."""
+        sc = self
+        if start is not None:
+            r0 = replace(sc.robots[0], position=tuple(float(x) for x in start[0]),
+                         orientation=tuple(float(x) for x in rot.normalize(np.asarray(start[1], float))))
+            sc = replace(sc, robots=(r0, *sc.robots[1:]))
+        if goal is not None:
+            sc = replace(sc, goal_position=tuple(float(x) for x in goal[0]),
+                         goal_orientation=tuple(float(x) for x in rot.normalize(np.asarray(goal[1], float))))
         return sc
 
     # ---- facts ----------------------------------------------------------------------------

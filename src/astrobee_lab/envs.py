@@ -31,7 +31,7 @@ from astrobee import rotations as rot
 from astrobee.scenario import Scenario
 from astrobee.task import RewardWeights
 
-from .flight import Flight, FlightObs, with_start_goal
+from .flight import Flight, FlightObs
 
 ACTION_MODES = ("wrench", "residual")
 OBS_FIELDS = (
@@ -138,8 +138,8 @@ class AstrobeeCargoEnv(gym.Env):
     def _draw(self, rng: np.random.Generator) -> Scenario:
         start, goal = random_start_goal(rng, self.base, self.hop_distance)
         q = self.base.robots[0].orientation
-        return with_start_goal(replace(self.base, name=self.base.name + "_random"),
-                               (start, q), (goal, q))
+        sc = replace(self.base, name=self.base.name + "_random")
+        return sc.with_start_goal((start, q), (goal, q))
 
     def step(self, action):
         a = np.minimum(np.maximum(np.asarray(action, dtype=float).reshape(6), -1.0), 1.0)

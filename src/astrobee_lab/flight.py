@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -409,11 +409,6 @@ class Flight:
                                          for n in self.names}, self._bag)
 
     # ---- the whole leg ----------------------------------------------------------------------
-    @property
-    def segment_done(self) -> bool:
-        """Every law finished its segment (STOPPED after following it), or none was flown."""
-        return all(law.segment_result != "" for law in self.laws.values())
-
     def finished(self) -> bool:
         """The leg is over as the mission sees it: the Task's goal reached (every robot at rest
         at its goal; the laws keep holding, their own STOPPED ends nothing), a fault watched
@@ -484,20 +479,3 @@ class Flight:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
-
-
-def with_start_goal(scenario: Scenario, start: tuple | None = None,
-                    goal: tuple | None = None) -> Scenario:
-    """The scenario with its (single) robot's start pose and/or its goal pose replaced
-    ((position, orientation) pairs)."""
-    sc = scenario
-    if start is not None:
-        r0 = sc.robots[0]
-        r0 = replace(r0, position=tuple(float(x) for x in start[0]),
-                     orientation=tuple(float(x) for x in rot.normalize(np.asarray(start[1], float))))
-        sc = replace(sc, robots=(r0, *sc.robots[1:]))
-    if goal is not None:
-        sc = replace(sc, goal_position=tuple(float(x) for x in goal[0]),
-                     goal_orientation=tuple(float(x) for x in rot.normalize(np.asarray(goal[1], float))))
-    return sc
-
