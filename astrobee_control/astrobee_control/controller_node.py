@@ -41,7 +41,7 @@ import numpy as np
 from astrobee import flight_modes
 from astrobee import msgconv as mc
 from astrobee import rotations as rot
-from roszen import node_main
+from roszen.runtime import node_main
 from roszen.peers import PublisherWatch
 from roszen.parameters import read_only, runtime
 
@@ -92,8 +92,8 @@ class ControllerNode(ControllerOutputs):
 
     def __init__(self, make_law: LawFactory, node_name: str, parameters: dict[str, Any] | None = None,
                  argv: list[str] | None = None) -> None:
-        import roszen
-        from roszen import LATCHED
+        from roszen import runtime as roszen
+        from roszen.runtime import LATCHED
 
         self.roszen = roszen
         self.node = n = roszen.Node(node_name, argv=argv)

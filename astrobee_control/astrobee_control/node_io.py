@@ -141,8 +141,8 @@ class SafetyDiagnostics:
     values; on a state change and at the LawFilter's pace, with one log line per change."""
 
     def __init__(self, node: Any, law_filter: LawFilter) -> None:
-        import roszen
-        from roszen import LATCHED
+        from roszen import runtime as roszen
+        from roszen.runtime import LATCHED
 
         M = roszen.message_class
         self.DiagnosticArray = M("diagnostic_msgs/msg/DiagnosticArray")

@@ -28,7 +28,7 @@ import numpy as np
 
 from astrobee import flight_modes
 from astrobee import msgconv as mc
-from roszen import node_main
+from roszen.runtime import node_main
 from roszen.parameters import read_only, runtime
 
 from .node_io import SAFETY, CarriedBag, SafetyDiagnostics, bag_descriptors, ekf_state  # noqa: F401
@@ -51,8 +51,8 @@ class SafetyFilterNode:
     """Wiring of one LawFilter to topics."""
 
     def __init__(self, argv: list[str] | None = None) -> None:
-        import roszen
-        from roszen import LATCHED
+        from roszen import runtime as roszen
+        from roszen.runtime import LATCHED
 
         self.node = n = roszen.Node("safety_filter", argv=argv)
         self.log = n.get_logger()

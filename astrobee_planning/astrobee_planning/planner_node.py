@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-import roszen
-from roszen import Durability, QoSProfile
+from roszen import runtime as roszen
+from roszen.runtime import Durability, QoSProfile
 
 from astrobee import config, flight_modes
 from astrobee import msgconv as mc
-from roszen import node_main
+from roszen.runtime import node_main
 from roszen.parameters import runtime
 
 from . import conversions as cv

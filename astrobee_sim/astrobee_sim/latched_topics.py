@@ -32,8 +32,8 @@ class LatchedTopics:
 
     def __init__(self, host: Any) -> None:
         """host: the SimNode (node, sim, names, now_ns())."""
-        import roszen
-        from roszen import LATCHED
+        from roszen import runtime as roszen
+        from roszen.runtime import LATCHED
         self.host = host
         n = host.node
         self.M = {k: roszen.message_class(v) for k, v in MESSAGES.items()}
@@ -49,7 +49,7 @@ class LatchedTopics:
     def add_robot(self, name: str) -> None:
         """A robot's latched flight-mode publisher (once per robot name)."""
         if name not in self.pub_mode:
-            import roszen
+            from roszen import runtime as roszen
             self.pub_mode[name] = self.host.node.create_publisher(
                 MESSAGES["mode"], mc.robot_topic(name, mc.FLIGHT_MODE), roszen.LATCHED)
 

@@ -22,7 +22,7 @@ class CommandInbox:
 
     def __init__(self, host: Any, command_max_lead: float) -> None:
         """host: the SimNode (node, sim, names, now_ns(), warn(), log)."""
-        import roszen
+        from roszen import runtime as roszen
         self.host = host
         self.max_lead_ns = int(command_max_lead * 1e9)
         self.support = roszen.codec.msg_support("astrobee_msgs/msg/FamCommand")

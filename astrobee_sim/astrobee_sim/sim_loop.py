@@ -127,7 +127,7 @@ class TickLoop:
 
     def spin(self) -> None:
         """Tick until shutdown, the node's end or max_sim_time."""
-        import roszen
+        from roszen import runtime as roszen
         host = self.host
         sim = host.sim
         while roszen.ok() and host.node._alive:

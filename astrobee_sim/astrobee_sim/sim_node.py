@@ -150,7 +150,7 @@ class SimNode:
 def build(argv: list[str]) -> SimNode:
     """The roszen node, its checked parameters, the backend they ask for, wired together.
     Raises ParameterError / ConfigError / ValueError (one line each) for a bad start."""
-    import roszen
+    from roszen import runtime as roszen
     node = roszen.Node("sim_node", argv=argv)
     backend = None
     try:
@@ -186,8 +186,8 @@ def build(argv: list[str]) -> SimNode:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (`ros2 run astrobee_sim sim_node`): exit 0 when stopped, 1 for a bad start."""
-    from roszen import node_main
     from roszen.parameters import ParameterException
+    from roszen.runtime import node_main
     return node_main.run(build, argv, errors=(config.ConfigError, ValueError, ParameterException),
                          prog="sim_node")
 

@@ -27,7 +27,7 @@ class SimServices:
     def __init__(self, host: Any) -> None:
         """host: the SimNode (node, sim, names, loop, state, latched, commands, now_ns(),
         warn(), log, add_robots())."""
-        import roszen
+        from roszen import runtime as roszen
         self.host = host
         self.response = roszen.response_class
         self.robots: set[str] = set()

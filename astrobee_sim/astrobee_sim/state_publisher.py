@@ -64,7 +64,7 @@ class StatePublisher:
 
     def __init__(self, host: Any, mesh_rate: float) -> None:
         """host: the SimNode (node, sim, names, now_ns(), latched)."""
-        import roszen
+        from roszen import runtime as roszen
         self.host = host
         self.codec = roszen.codec
         n = host.node
@@ -95,7 +95,7 @@ class StatePublisher:
             return
         n = self.host.node
         t = lambda rel: mc.robot_topic(name, rel)  # noqa: E731
-        import roszen
+        from roszen import runtime as roszen
         self.robot_io[name] = {
             "pose": n.create_publisher(MESSAGES["pose"], t(mc.POSE), 10),
             "twist": n.create_publisher(MESSAGES["twist"], t(mc.TWIST), 10),

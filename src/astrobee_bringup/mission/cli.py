@@ -25,7 +25,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                 await_recorder: bool = False, settle_budget: float = SETTLE_BUDGET) -> int:
     """Fly the scenarios in order in the running graph; write run_dir/summary.json + plots.
     Returns the process exit status (0 all legs succeeded, 1 failure, 130 interrupted)."""
-    import roszen
+    from roszen import runtime as roszen
 
     stop = {"flag": False}
 

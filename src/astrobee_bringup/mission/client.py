@@ -25,8 +25,8 @@ class MissionClient(SimResets):
 
     def __init__(self, node: Any, namespace: str = "", stop_flag=None, handover: bool = False,
                  await_recorder: bool = False) -> None:
-        import roszen
-        from roszen import Durability, QoSProfile
+        from roszen import runtime as roszen
+        from roszen.runtime import Durability, QoSProfile
 
         self.roszen = roszen
         self.node = node
