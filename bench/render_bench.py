@@ -93,14 +93,14 @@ def main() -> int:
     for what, s, target in rows:
         print(f"{what:<44}{1000 * s:>10.1f}{1 / s:>10.1f}  {target}")
     if len(sys.argv) > 1:
-        from astrobee_bringup.render_bag import render
+        from astrobee_bringup.render_recording import render
         with tempfile.TemporaryDirectory() as d:
             t = time.perf_counter()
             res = render(sys.argv[1], Path(d) / "flight.mp4", duration=60.0)
             dt = time.perf_counter() - t
         print(f"\nastrobee bag render {sys.argv[1]}: {res.frames} frames, {res.sim_seconds:.1f} s "
               f"of flight in {dt:.1f} s wall ({res.frames / dt:.1f} frames/s incl. reading the "
-              f"recording), cargo bag surface: {res.bag_surface}")
+              f"recording), cargo bag surface: {res.cargo_surface}")
     return 0
 
 

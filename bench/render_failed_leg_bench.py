@@ -1,4 +1,4 @@
-"""Failed-leg video benchmark: `astrobee bag render` (render_bag.render, the default 896x384
+"""Failed-leg video benchmark: `astrobee bag render` (render_recording.render, the default 896x384
 frame, x4, 10 fps) on what a failed leg records: a robot flung 1e7 m off by an exploded
 simulation, NaN poses, zero quaternions, a single pose, and a healthy 4 s hop for comparison.
 Prints wall and CPU time and the frames written (or the one-line reason it was refused).
@@ -20,7 +20,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "cli"))
 from test_render_degenerate import Q, START, write_poses  # noqa: E402
 
-from astrobee_bringup import render_bag as rb  # noqa: E402
+from astrobee_bringup import render_recording as rb  # noqa: E402
+from astrobee_bringup.render_tracks import RenderError  # noqa: E402
 
 
 def cases() -> dict[str, list]:
@@ -48,7 +49,7 @@ def main() -> int:
             try:
                 res = rb.render(bag, bag.with_suffix(".mp4"))
                 out = f"{res.frames} frames, {res.sim_seconds:.1f} s of flight"
-            except rb.RenderError as exc:
+            except RenderError as exc:
                 out = f"refused: {str(exc).split(': ', 1)[-1]}"
             print(f"{name:<34}{time.perf_counter() - t:>9.2f}{time.process_time() - c:>9.2f}  {out}")
     print("reference before the fix: the flung robot > 60 s CPU for ONE frame; the interleaved "

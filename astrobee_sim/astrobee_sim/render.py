@@ -11,8 +11,8 @@ a bounding box (no camera inside the station, no near-plane clipping) and sorts 
 Polylines (planned path, controller candidates, the flown trail) and the text overlay are drawn
 afterwards with Pillow on the RGB image, projected with the same view/projection matrices (on
 top of the geometry, so a path stays visible through a hatch). Nothing here reads a recording or
-imports transport code: `astrobee_bringup.render_bag` feeds it from a bag, and an environment's
-`render_mode="rgb_array"` can feed it from a live `Simulation`.
+imports transport code: `astrobee_bringup.render_recording` feeds it from a recording, and an
+environment's `render_mode="rgb_array"` can feed it from a live `Simulation`.
 """
 from __future__ import annotations
 

@@ -20,8 +20,8 @@ LAUNCH = Verb("start a launch description (astrobee_bringup/launch/NAME.py): "
               "launch NAME [arg:=value ...]", "astrobee_bringup.cli:launch_main")
 STUDY = Verb("Monte Carlo studies: study run FILE | report DIR | reflow DIR ROW",
              "astrobee_lab.study.cli:main")
-RENDER = Verb("render a recorded run to MP4/GIF, headless: bag render BAG -o flight.mp4",
-              "astrobee_bringup.render_bag:main")
+RENDER = Verb("render a recorded run to MP4/GIF, headless: bag render RECORDING -o flight.mp4",
+              "astrobee_bringup.render_recording:main")
 
 
 def launch_main(argv: list[str]) -> int:

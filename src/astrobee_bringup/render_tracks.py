@@ -68,13 +68,13 @@ def _unit_quat(q: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class Recording:
-    """What a video needs from a bag, on one timeline (s)."""
+class FlightTracks:
+    """What a video needs from a recording, on one timeline (s): the robots', the cargo bag's."""
     robots: dict[str, Track] = field(default_factory=dict)
-    bag: Track | None = None
-    bag_model: str = ""
-    bag_variant: str = ""
-    bag_nodes: int = 0
+    cargo: Track | None = None
+    cargo_model: str = ""
+    cargo_variant: str = ""
+    cargo_nodes: int = 0
     mesh_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mesh_local: list[np.ndarray] = field(default_factory=list)    # bag frame (world if no state)
     mesh_faces: np.ndarray | None = None
@@ -82,12 +82,12 @@ class Recording:
     paths: list[tuple[float, np.ndarray]] = field(default_factory=list)
     candidates: list[tuple[float, list[np.ndarray]]] = field(default_factory=list)
     robot_order: list[str] = field(default_factory=list)           # the scenario's order
-    bag_size: np.ndarray | None = None                             # m, from /sim/scenario
-    bag_handles: list[np.ndarray] = field(default_factory=list)    # handle points, bag frame
+    cargo_size: np.ndarray | None = None                           # m, from /sim/scenario
+    cargo_handles: list[np.ndarray] = field(default_factory=list)  # handle points, bag frame
     # /sim/contacts: times, robot and bag clearance (m, nan unknown), contact points per sample
     contact_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     robot_clearance: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    bag_clearance: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cargo_clearance: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_points: list[np.ndarray] = field(default_factory=list)
 
     @property
@@ -134,23 +134,22 @@ class _Timeline:
         return float(stamp + self.off[i])
 
 
-def read_recording(bag_dir: str | os.PathLike,
-                   log_window: tuple[float, float] | None = None) -> Recording:
+def read_tracks(recording: str | os.PathLike,
+                log_window: tuple[float, float] | None = None) -> FlightTracks:
     """Everything a video needs from a rosbag2 directory (optionally only the messages
     recorded in the wall-clock window `log_window`, seconds)."""
-    from astrobee_lab.recording import Recording as Reader
-    from astrobee_lab.recording import RecordingError
+    from astrobee_lab.recording import Recording, RecordingError
 
     try:
-        reader = Reader(bag_dir)
-        return _read(reader, bag_dir, log_window)
+        reader = Recording(recording)
+        return _read(reader, recording, log_window)
     except RecordingError as exc:           # missing, unreadable, or a damaged chunk
         raise RenderError(str(exc)) from None
 
 
-def _read(reader: Any, bag_dir: str | os.PathLike,
-          log_window: tuple[float, float] | None) -> Recording:
-    """read_recording's work on the opened recording `reader`."""
+def _read(reader: Any, recording: str | os.PathLike,
+          log_window: tuple[float, float] | None) -> FlightTracks:
+    """read_tracks's work on the opened recording `reader`."""
     topics = reader.topics
     pose_topics = {n: n[: -len("/loc/truth/pose")].strip("/") for n, ty in topics.items()
                    if n.endswith("/loc/truth/pose") and ty.endswith("PoseStamped")}
@@ -182,10 +181,10 @@ def _read(reader: Any, bag_dir: str | os.PathLike,
     poses = {k: v for k, v in poses.items() if v}
     if not poses:
         if recorded:
-            raise RenderError(f"{bag_dir}: none of the {recorded} robot poses recorded"
+            raise RenderError(f"{recording}: none of the {recorded} robot poses recorded"
                               + (" in the selected window" if log_window else "")
                               + f" is usable (not finite, or farther than {MAX_COORD:g} m)")
-        raise RenderError(f"{bag_dir}: no robot pose recorded (/loc/truth/pose or /tf)"
+        raise RenderError(f"{recording}: no robot pose recorded (/loc/truth/pose or /tf)"
                           + (" in the selected window" if log_window else ""))
     order = [r for r in (scenario.robots if scenario is not None else []) if r in poses]
     order += sorted(r for r in poses if r not in order)
@@ -193,11 +192,11 @@ def _read(reader: Any, bag_dir: str | os.PathLike,
     # leave a few in this leg's window)
     ref = max(poses.values(), key=len)
     line = _Timeline([p[0] for p in ref], [p[1] for p in ref])
-    rec = Recording(robot_order=order)
+    rec = FlightTracks(robot_order=order)
     for name in order:
         rec.robots[name] = _track([(line.of(ln, st), x, q) for ln, st, x, q in poses[name]])
     _read_scenario(rec, scenario)
-    _read_bag_topics(rec, raw, line)
+    _read_cargo_topics(rec, raw, line)
     _read_contacts(rec, raw.get("/sim/contacts", []), line)
     for topic in (n for n in raw if n.endswith("/mob/planner/path")):
         for ln, msg in raw[topic]:
@@ -256,37 +255,37 @@ def _candidate_lines(msg: Any) -> list[np.ndarray]:
     return out
 
 
-def _read_bag_topics(rec: Recording, raw: dict, line: _Timeline) -> None:
+def _read_cargo_topics(rec: FlightTracks, raw: dict, line: _Timeline) -> None:
     """The cargo bag's state track and its mesh samples in the bag frame (or its rest shape)."""
     states = [(ln, msg) for n in raw if n.endswith("/sim/bag/state") for ln, msg in raw[n]
               if _usable(_xyz(msg.pose.position), _xyzw(msg.pose.orientation))]
     meshes = [(ln, msg) for n in raw if n.endswith("/sim/bag/mesh") for ln, msg in raw[n]]
     if states:
-        rec.bag = _track([(line.of(ln, _stamp(m.header)), _xyz(m.pose.position),
+        rec.cargo = _track([(line.of(ln, _stamp(m.header)), _xyz(m.pose.position),
                            _xyzw(m.pose.orientation)) for ln, m in states])
-        rec.bag_model, rec.bag_variant = str(states[-1][1].model), str(states[-1][1].variant)
+        rec.cargo_model, rec.cargo_variant = str(states[-1][1].model), str(states[-1][1].variant)
     times, local = [], []
     for ln, m in meshes:
         pts = np.asarray(m.positions, float).reshape(-1, 3)
         if len(pts) < 4 or (local and len(pts) != len(local[0])) or not _usable(pts):
             continue
         t = line.of(ln, _stamp(m.header))
-        if rec.bag is not None:
-            c, q = rec.bag.at(t)
+        if rec.cargo is not None:
+            c, q = rec.cargo.at(t)
             pts = rot.rotate(rot.conjugate(q), pts - c)
         times.append(t)
         local.append(pts)
     if not local:
-        if rec.bag is not None and rec.bag_size is not None:    # no mesh sample: rest shape
-            pts, faces, how = rest_surface(rec.bag_model, rec.bag_variant, rec.bag_size,
-                                           rec.bag_nodes)
+        if rec.cargo is not None and rec.cargo_size is not None:    # no mesh sample: rest shape
+            pts, faces, how = rest_surface(rec.cargo_model, rec.cargo_variant, rec.cargo_size,
+                                           rec.cargo_nodes)
             rec.mesh_t, rec.mesh_local = np.zeros(1), [pts]
             rec.mesh_faces, rec.mesh_source = faces, f"{how} (rest shape: no mesh recorded)"
         return
     order = np.argsort(times, kind="stable")
     rec.mesh_t = np.asarray(times)[order]
     rec.mesh_local = [local[i] for i in order]
-    rec.mesh_faces, rec.mesh_source = surface_faces(rec.bag_model, rec.bag_variant,
+    rec.mesh_faces, rec.mesh_source = surface_faces(rec.cargo_model, rec.cargo_variant,
                                                     rec.mesh_local[0])
 
 
@@ -345,16 +344,16 @@ def _scenario(reader: Any, log_window: tuple[float, float] | None) -> Any | None
     return last
 
 
-def _read_scenario(rec: Recording, sc: Any | None) -> None:
+def _read_scenario(rec: FlightTracks, sc: Any | None) -> None:
     """The bag's model, variant, size, node count and handle points from /sim/scenario."""
     if sc is None or not bool(sc.carrying_bag):
         return
-    rec.bag_model, rec.bag_variant = str(sc.bag_model), str(sc.bag_variant)
-    rec.bag_nodes = int(sc.bag_nodes)
+    rec.cargo_model, rec.cargo_variant = str(sc.bag_model), str(sc.bag_variant)
+    rec.cargo_nodes = int(sc.bag_nodes)
     size = np.array([sc.bag_size.x, sc.bag_size.y, sc.bag_size.z], float)
     if np.all(np.isfinite(size)) and np.all(size > 0):
-        rec.bag_size = size
-        rec.bag_handles = handle_points(rec.bag_variant, size)
+        rec.cargo_size = size
+        rec.cargo_handles = handle_points(rec.cargo_variant, size)
 
 
 def handle_points(variant: str, size: np.ndarray) -> list[np.ndarray]:
@@ -405,7 +404,7 @@ def _resolutions(size: np.ndarray, nodes: int) -> list[int]:
     return sorted(out, key=lambda r: abs(r - nodes))
 
 
-def _read_contacts(rec: Recording, raw: list[tuple[int, Any]], line: "_Timeline") -> None:
+def _read_contacts(rec: FlightTracks, raw: list[tuple[int, Any]], line: "_Timeline") -> None:
     """Clearances and contact points of /sim/contacts on the timeline."""
     if not raw:
         return
@@ -413,30 +412,30 @@ def _read_contacts(rec: Recording, raw: list[tuple[int, Any]], line: "_Timeline"
     rec.contact_t = np.array([t for t, _ in rows])
     neg = lambda v: float(v) if float(v) >= 0 else math.nan   # noqa: E731 - negative: unknown
     rec.robot_clearance = np.array([neg(m.robot_clearance) for _, m in rows])
-    rec.bag_clearance = np.array([neg(m.bag_clearance) for _, m in rows])
+    rec.cargo_clearance = np.array([neg(m.bag_clearance) for _, m in rows])
     rec.contact_points = [np.array([_xyz(c.position) for c in m.contacts], float).reshape(-1, 3)
                           for _, m in rows]
 
 
 # ---- overlay figures ---------------------------------------------------------------------
-def swing_angle(rec: Recording, t: float) -> float | None:
+def swing_angle(rec: FlightTracks, t: float) -> float | None:
     """The bag's swing about the handle at t (rad), None without a bag state or robot: the
     angle between the direction from the handle to the bag's centre now and at the leg's first
     bag sample (at rest), both in the body frame of the robot holding handle 0. The handle point
     is carried rigidly in that robot's body frame from the first sample (the arm holds it); a
     bag whose handles are unknown swings about the robot's centre instead."""
-    if rec.bag is None or not rec.robots:
+    if rec.cargo is None or not rec.robots:
         return None
     name = rec.robot_order[0] if rec.robot_order else next(iter(rec.robots))
     robot = rec.robots[name]
-    t_rest = float(rec.bag.t[0])
+    t_rest = float(rec.cargo.t[0])
     p0, q0 = robot.at(t_rest)
-    c0, qb0 = rec.bag.at(t_rest)
-    handle = (c0 + rot.rotate(qb0, rec.bag_handles[0]) if rec.bag_handles else p0)
+    c0, qb0 = rec.cargo.at(t_rest)
+    handle = (c0 + rot.rotate(qb0, rec.cargo_handles[0]) if rec.cargo_handles else p0)
     grip = rot.rotate(rot.conjugate(q0), handle - p0)             # in the robot's body frame
     rest = rot.rotate(rot.conjugate(q0), c0 - p0) - grip
     p, q = robot.at(t)
-    c, _ = rec.bag.at(t)
+    c, _ = rec.cargo.at(t)
     now = rot.rotate(rot.conjugate(q), c - p) - grip
     n0, n1 = float(np.linalg.norm(rest)), float(np.linalg.norm(now))
     if n0 < 1e-6 or n1 < 1e-6:
@@ -444,7 +443,7 @@ def swing_angle(rec: Recording, t: float) -> float | None:
     return float(math.acos(max(-1.0, min(1.0, float(rest @ now) / (n0 * n1)))))
 
 
-def _contacts_at(rec: Recording, t: float, flash: float) -> tuple[int, float, float, list]:
+def _contacts_at(rec: FlightTracks, t: float, flash: float) -> tuple[int, float, float, list]:
     """(index of the contact sample at t or -1, robot and bag clearance there (m, nan
     unknown), contact points of the samples in (t - flash, t])."""
     if not len(rec.contact_t):
@@ -454,4 +453,4 @@ def _contacts_at(rec: Recording, t: float, flash: float) -> tuple[int, float, fl
         return -1, math.nan, math.nan, []
     lo = int(np.searchsorted(rec.contact_t, t - flash, side="right"))
     pts = [p for i in range(lo, k + 1) for p in rec.contact_points[i]]
-    return k, float(rec.robot_clearance[k]), float(rec.bag_clearance[k]), pts
+    return k, float(rec.robot_clearance[k]), float(rec.cargo_clearance[k]), pts

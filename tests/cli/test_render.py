@@ -134,10 +134,10 @@ def test_gif_and_mp4_have_the_frames_asked_for(recording, tmp_path):
 def test_robot_is_drawn_where_it_is(recording):
     """Rendering the same camera with and without the robot changes the pixels around the
     robot's projected position and leaves the far corners alone."""
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_tracks
     from astrobee_sim.render import Camera, Renderer, Scene, project
 
-    rec = render_bag.read_recording(recording)
+    rec = render_tracks.read_tracks(recording)
     pos, q = rec.robots[""].at(2.0)
     assert np.allclose(pos, START + [0, -0.4, 0], atol=1e-6)
     r = Renderer()
@@ -158,48 +158,48 @@ def test_robot_is_drawn_where_it_is(recording):
 
 
 def test_recording_timeline_bag_and_candidates(recording):
-    from astrobee_bringup import render_bag
-    rec = render_bag.read_recording(recording)
+    from astrobee_bringup import render_recording, render_tracks
+    rec = render_tracks.read_tracks(recording)
     assert rec.span == pytest.approx((0.0, 4.0))
     assert rec.mesh_source == "boxes" and len(rec.mesh_faces) == 12
-    scene, heading = render_bag.scene_at(rec, 1.0, 4.0, 0.0)
+    scene, heading = render_recording.scene_at(rec, 1.0, 4.0, 0.0)
     assert heading[1] < 0 and abs(heading[0]) < 1e-6                # flying along -y
     c = scene.bag.vertices.mean(axis=0)
     assert np.allclose(c, START + [0, -0.2 - 0.55, 0], atol=1e-6)  # placed at the state pose
     assert scene.arm_deployed
     colours = [ln.rgb for ln in scene.lines]
-    assert render_bag.PATH_RGB in colours and render_bag.CAND_RGB in colours
+    assert render_recording.PATH_RGB in colours and render_recording.CAND_RGB in colours
     assert any("speed 0.200 m/s" in s for s in scene.text)
     # 0.6 s after the last candidate (t=1) it is stale and not drawn
-    scene, _ = render_bag.scene_at(rec, 1.6, 4.0, 0.0)
-    assert render_bag.CAND_RGB not in [ln.rgb for ln in scene.lines]
+    scene, _ = render_recording.scene_at(rec, 1.6, 4.0, 0.0)
+    assert render_recording.CAND_RGB not in [ln.rgb for ln in scene.lines]
 
 
 def test_fem_node_cloud_gets_the_generated_surface(tmp_path):
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_tracks
     from astrobee_sim.bags.base import handle_dirs
     from astrobee_sim.bags.mesh import bag_mesh
     mesh = bag_mesh([0.5, 0.42, 0.25], handle_dirs("front"), 250)
     bag = tmp_path / "bag"
     write_recording(bag, seconds=1.0, fem_nodes=mesh.nodes - mesh.nodes.mean(axis=0))
-    rec = render_bag.read_recording(bag)
+    rec = render_tracks.read_tracks(bag)
     assert rec.mesh_source.startswith("tet mesh")
     from astrobee_sim.render import boundary_faces
     assert len(rec.mesh_faces) == len(boundary_faces(mesh.tets))
     # an unknown node count falls back to the convex hull of the cloud
-    faces, how = render_bag.surface_faces("fem", "front", np.random.default_rng(0).random((37, 3)))
+    faces, how = render_tracks.surface_faces("fem", "front", np.random.default_rng(0).random((37, 3)))
     assert how == "convex hull" and faces.shape[1] == 3
 
 
 def test_demo_legs_get_one_video_each(recording, tmp_path):
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_recording
     run = tmp_path / "run"
     run.mkdir()
     (run / "summary.json").write_text(json.dumps({"legs": [
         {"scenario": "a", "wall_t0": T0_NS / 1e9, "wall_t1": T0_NS / 1e9 + 1.0},
         {"scenario": "b", "wall_t0": T0_NS / 1e9 + 3.0, "wall_t1": T0_NS / 1e9 + 4.5},
         {"scenario": "c", "wall_t0": 1.0, "wall_t1": 2.0}]}))
-    out = render_demo_legs = render_bag.render_demo_legs(run, recording, fps=2, speed=2,
+    out = render_demo_legs = render_recording.render_demo_legs(run, recording, fps=2, speed=2,
                                                          scale=0.25)
     assert [p.name for p in render_demo_legs] == ["video_a.mp4", "video_b.mp4"]
     assert all(p.stat().st_size > 0 for p in out)

@@ -9,7 +9,7 @@ import pytest
 
 from test_render import write_recording
 
-from astrobee_bringup.render_bag import main as render_main
+from astrobee_bringup.render_recording import main as render_main
 from astrobee_lab.recording import Recording, RecordingError
 
 

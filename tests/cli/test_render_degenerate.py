@@ -11,7 +11,8 @@ import warnings
 import numpy as np
 import pytest
 
-from astrobee_bringup import render_bag as rb
+from astrobee_bringup import render_recording as rb
+from astrobee_bringup import render_tracks as rt
 from roszen import typestore
 from roszen.bag.writer import BagWriter
 from roszen.qos import QoSProfile
@@ -42,7 +43,7 @@ def write_poses(bag_dir, samples, log_s=None) -> None:
 @pytest.mark.parametrize("seconds, fps, speed", [
     (float("nan"), 10, 4), (float("inf"), 10, 4), (-1.0, 10, 4), (5.0, 0.0, 4), (5.0, 10, 0.0)])
 def test_frame_count_refuses_what_is_not_a_flight(seconds, fps, speed):
-    with pytest.raises(rb.RenderError) as exc:
+    with pytest.raises(rt.RenderError) as exc:
         rb.frame_count(seconds, fps, speed)
     assert len(str(exc.value).splitlines()) == 1
 
@@ -50,12 +51,12 @@ def test_frame_count_refuses_what_is_not_a_flight(seconds, fps, speed):
 def test_frame_count_of_a_zero_length_leg_is_one_frame_and_long_ones_are_refused():
     assert rb.frame_count(0.0, 10, 4) == 1
     assert rb.frame_count(4.0, 2, 2) == 5
-    with pytest.raises(rb.RenderError, match="more than 100"):
+    with pytest.raises(rt.RenderError, match="more than 100"):
         rb.frame_count(1000.0, 10, 4, max_frames=100)
 
 
 def test_zero_quaternions_interpolate_without_nan():
-    tr = rb.Track(np.array([0.0, 1.0, 2.0]), np.zeros((3, 3)),
+    tr = rt.Track(np.array([0.0, 1.0, 2.0]), np.zeros((3, 3)),
                   np.array([[0, 0, 0, 1.0], [0, 0, 0, 0.0], [0, 0, 0, 0.0]]))
     with warnings.catch_warnings():
         warnings.simplefilter("error")                  # a 0/0 warns: fails the test
@@ -69,11 +70,11 @@ def test_unusable_poses_are_dropped_and_a_leg_of_them_refused(tmp_path):
     flung = [(0.05 + 0.016 * k, START + [0, 1e7 * (k + 1), 0], Q) for k in range(3)]
     bad = [(0.2, [math.nan] * 3, Q), (0.25, START, [0, 0, 0, 0]), (0.3, [math.inf, 0, 0], Q)]
     write_poses(tmp_path / "mixed", good + flung + bad)
-    rec = rb.read_recording(tmp_path / "mixed")
+    rec = rt.read_tracks(tmp_path / "mixed")
     assert len(rec.robots[""].t) == 3 and rec.span == pytest.approx((0.0, 0.032))
     write_poses(tmp_path / "bad", flung + bad)
-    with pytest.raises(rb.RenderError, match="none of the 6 robot poses .* is usable"):
-        rb.read_recording(tmp_path / "bad")
+    with pytest.raises(rt.RenderError, match="none of the 6 robot poses .* is usable"):
+        rt.read_tracks(tmp_path / "bad")
 
 
 def test_one_pose_renders_one_frame_and_too_long_a_flight_is_refused_at_once(tmp_path):
@@ -81,7 +82,7 @@ def test_one_pose_renders_one_frame_and_too_long_a_flight_is_refused_at_once(tmp
     res = rb.render(tmp_path / "bag", tmp_path / "one.gif", scale=0.25)
     assert res.frames == 1 and res.sim_seconds == 0.0 and (tmp_path / "one.gif").stat().st_size
     write_poses(tmp_path / "long", [(0.0, START, Q), (500.0, START, Q)])
-    with pytest.raises(rb.RenderError, match="1251 frames, more than 1000"):
+    with pytest.raises(rt.RenderError, match="1251 frames, more than 1000"):
         rb.render(tmp_path / "long", tmp_path / "long.gif", max_frames=1000)
     assert not (tmp_path / "long.gif").exists()
 
@@ -149,10 +150,10 @@ def test_interleaved_clocks_do_not_stretch_the_timeline(tmp_path):
     jump back) still continues the timeline."""
     alternating = [(0.016 * k + (45.0 if k % 2 else 0.0), START, Q) for k in range(40)]
     write_poses(tmp_path / "alt", alternating, log_s=[0.016 * k for k in range(40)])
-    rec = rb.read_recording(tmp_path / "alt")
+    rec = rt.read_tracks(tmp_path / "alt")
     assert rec.span[1] - rec.span[0] == pytest.approx(39 * 0.016), rec.span     # not 900 s
     reset = [(45.0 + 0.016 * k, START, Q) for k in range(10)] + [(0.016 * k, START, Q)
                                                                   for k in range(10)]
-    line = rb._Timeline([int(1e9 * 0.016 * k) for k in range(20)], [s[0] for s in reset])
+    line = rt._Timeline([int(1e9 * 0.016 * k) for k in range(20)], [s[0] for s in reset])
     assert line.stamped and np.all(np.diff(line.cont) > 0)
     assert line.cont[-1] - line.cont[0] == pytest.approx(19 * 0.016, abs=0.02)

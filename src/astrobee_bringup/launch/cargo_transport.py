@@ -284,11 +284,11 @@ def post_run(ctx: LaunchContext, status: int) -> None:
     if ctx.flag("record", True) and ctx.flag("mission", True):
         print(finalize(ctx.run_dir, bag_dir), flush=True)
         if ctx.flag("video", ctx.flag("demo")):      # one video per leg (default with the demo)
-            from astrobee_bringup.render_bag import render_demo_legs
+            from astrobee_bringup.render_recording import render_demo_legs
             for path in render_demo_legs(ctx.run_dir, bag_dir):
                 print(f"[video] {path}", flush=True)
             if ctx.flag("demo"):                    # at 8x: half the frames of a leg's
-                from astrobee_bringup.render_bag import render_demo_compare
+                from astrobee_bringup.render_recording import render_demo_compare
                 out = render_demo_compare(ctx.run_dir, DEMO_COMPARE, bag_dir, speed=8.0)
                 if out is not None:
                     print(f"[video] {out} ({' vs '.join(DEMO_COMPARE)})", flush=True)

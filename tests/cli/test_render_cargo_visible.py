@@ -121,21 +121,21 @@ def frames_of(path, size):
     (("queen",), "fem", False),                    # the FEM bag, no mesh sample recorded
 ])
 def test_the_bag_is_in_every_frame_of_both_views(tmp_path, robots, bag, mesh):
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_recording, render_tracks
     bag_dir = tmp_path / "bag"
     write_leg(bag_dir, robots, bag, mesh)
-    rec = render_bag.read_recording(bag_dir)
+    rec = render_tracks.read_tracks(bag_dir)
     assert list(rec.robots) == list(robots)
     if not mesh:
         assert "rest shape" in rec.mesh_source and rec.mesh_source.startswith("tet mesh")
-    res = render_bag.render(bag_dir, tmp_path / "v.mp4", fps=2, speed=1, scale=0.5)
+    res = render_recording.render(bag_dir, tmp_path / "v.mp4", fps=2, speed=1, scale=0.5)
     frames = frames_of(res.path, res.size)
     assert len(frames) == res.frames == 5
     chase_w = res.size[0] - res.size[1]                  # overview is square
     for f in frames:
         assert bag_pixels(f[:, :chase_w]) > 30, "no cargo bag in the chase view"
         assert bag_pixels(f[:, chase_w:]) > 3, "no cargo bag in the overview"
-    scene, _ = render_bag.scene_at(rec, 1.0, 1.0, 0.0)
+    scene, _ = render_recording.scene_at(rec, 1.0, 1.0, 0.0)
     assert len(scene.robots) == len(robots)
     assert not any("deformation" in s for s in scene.text)
     assert any("swing" in s and "deg" in s for s in scene.text)
@@ -143,32 +143,32 @@ def test_the_bag_is_in_every_frame_of_both_views(tmp_path, robots, bag, mesh):
 
 
 def test_no_bag_leg_shows_no_bag(tmp_path):
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_recording
     bag_dir = tmp_path / "bag"
     write_leg(bag_dir, ("",), None)
-    res = render_bag.render(bag_dir, tmp_path / "v.mp4", fps=1, speed=2, scale=0.5)
+    res = render_recording.render(bag_dir, tmp_path / "v.mp4", fps=1, speed=2, scale=0.5)
     frames = frames_of(res.path, res.size)
     assert frames and all(bag_pixels(f) == 0 for f in frames)
-    assert res.bag_surface == "none"
+    assert res.cargo_surface == "none"
 
 
 def test_a_contact_flashes_red_and_the_swing_is_measured(tmp_path):
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_recording, render_tracks
     from astrobee_sim.render import FlightRenderer, overview_camera
     bag_dir = tmp_path / "bag"
     write_leg(bag_dir, ("",), "rigid", contact_at=1.0)
-    rec = render_bag.read_recording(bag_dir)
+    rec = render_tracks.read_tracks(bag_dir)
     # the bag moves with the robot: no swing; its handle ('front': -y, 0.25 m from the centre
     # here) stays on the robot, so the centre moved 0.1 m sideways swings atan(0.1 / 0.25)
-    assert render_bag.swing_angle(rec, 1.5) == pytest.approx(0.0, abs=1e-6)
-    rec.bag.pos[-1] += [0.1, 0.0, 0.0]
-    assert np.degrees(render_bag.swing_angle(rec, rec.bag.t[-1])) == pytest.approx(
+    assert render_tracks.swing_angle(rec, 1.5) == pytest.approx(0.0, abs=1e-6)
+    rec.cargo.pos[-1] += [0.1, 0.0, 0.0]
+    assert np.degrees(render_tracks.swing_angle(rec, rec.cargo.t[-1])) == pytest.approx(
         np.degrees(np.arctan2(0.1, 0.25)), abs=0.5)
     fr = FlightRenderer((256, 192), (192, 192))
     try:
         ov = overview_camera(rec.robots[""].pos)
-        hit, _ = render_bag.scene_at(rec, 1.0, 1.0, 0.0)
-        calm, _ = render_bag.scene_at(rec, 1.6, 1.0, 0.0)
+        hit, _ = render_recording.scene_at(rec, 1.0, 1.0, 0.0)
+        calm, _ = render_recording.scene_at(rec, 1.6, 1.0, 0.0)
         assert any(s.startswith("CONTACT") for s in hit.text) and hit.spots
         assert not calm.spots
         assert red_pixels(fr.render(hit, None, ov)) > red_pixels(fr.render(calm, None, ov)) + 20
@@ -177,7 +177,7 @@ def test_a_contact_flashes_red_and_the_swing_is_measured(tmp_path):
 
 
 def test_compare_two_legs_of_one_run_side_by_side(tmp_path):
-    from astrobee_bringup import render_bag
+    from astrobee_bringup import render_recording
     bag_dir = tmp_path / "run" / "bag"
     bag_dir.parent.mkdir()
     w = write_leg(bag_dir, ("",), "rigid", seconds=1.0, close=False)
@@ -186,7 +186,7 @@ def test_compare_two_legs_of_one_run_side_by_side(tmp_path):
         {"scenario": "pd", "wall_t0": T0_NS / 1e9, "wall_t1": T0_NS / 1e9 + 2},
         {"scenario": "mpc", "wall_t0": T0_NS / 1e9 + 5, "wall_t1": T0_NS / 1e9 + 7}]}))
     out = tmp_path / "c.mp4"
-    assert render_bag.main(["--compare", f"{bag_dir}:0", f"{bag_dir}:1", "-o", str(out),
+    assert render_recording.main(["--compare", f"{bag_dir}:0", f"{bag_dir}:1", "-o", str(out),
                             "--fps", "2", "--speed", "1", "--scale", "0.5"]) == 0
     size = (464, 320)                     # two 224-wide columns, a 4 px divider, padded to 16
     frames = frames_of(out, size)
@@ -194,11 +194,11 @@ def test_compare_two_legs_of_one_run_side_by_side(tmp_path):
     half = size[0] // 2
     for f in frames:
         assert bag_pixels(f[:, :half]) > 10 and bag_pixels(f[:, half:]) > 10
-    assert render_bag.main(["--compare", str(bag_dir), "-o", str(out)]) == 1
+    assert render_recording.main(["--compare", str(bag_dir), "-o", str(out)]) == 1
     # the demo's comparison: two legs by scenario, noted in summary.json
     run = tmp_path / "run"
-    made = render_bag.render_demo_compare(run, ("pd", "mpc"), fps=1, speed=2, scale=0.25)
+    made = render_recording.render_demo_compare(run, ("pd", "mpc"), fps=1, speed=2, scale=0.25)
     assert made == run / "video_compare.mp4" and made.stat().st_size > 0
     note = json.loads((run / "summary.json").read_text())["comparison"]
     assert note == {"legs": ["pd", "mpc"], "video": "video_compare.mp4"}
-    assert render_bag.render_demo_compare(run, ("pd", "lqr")) is None
+    assert render_recording.render_demo_compare(run, ("pd", "lqr")) is None

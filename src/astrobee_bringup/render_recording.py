@@ -29,10 +29,8 @@ from typing import Any, Callable
 import numpy as np
 
 from astrobee import rotations as rot
-from astrobee_bringup.render_tracks import (MAX_COORD, MAX_RESETS, Recording,  # noqa: F401
-                                            RenderError, Track, _contacts_at, _Timeline,
-                                            _usable, read_recording, surface_faces,
-                                            swing_angle)
+from astrobee_bringup.render_tracks import (FlightTracks, RenderError, Track, _contacts_at,
+                                            read_tracks, swing_angle)
 
 DEFAULT_FPS = 10
 DEFAULT_SPEED = 4.0                    # sim seconds per video second
@@ -47,7 +45,7 @@ def _fmt_m(v: float) -> str:
 
 
 # ---- scenes --------------------------------------------------------------------------------
-def scene_at(rec: Recording, t: float, speed: float, t0: float, flash: float = FLASH):
+def scene_at(rec: FlightTracks, t: float, speed: float, t0: float, flash: float = FLASH):
     """The render.Scene of time t (every robot, the cargo bag, paths, overlay), and the first
     robot's direction of travel."""
     from astrobee_sim.render import Polyline, Scene, Spot, Surface
@@ -58,13 +56,13 @@ def scene_at(rec: Recording, t: float, speed: float, t0: float, flash: float = F
     first = rec.robots[order[0]]
     vel = first.velocity(t)
     heading = vel if np.linalg.norm(vel) > 0.02 else _heading_from_path(rec, t, first)
-    if rec.bag is not None or rec.mesh_local:
+    if rec.cargo is not None or rec.mesh_local:
         sc.arm_deployed = True
         if rec.mesh_local and rec.mesh_faces is not None:
             k = max(int(np.searchsorted(rec.mesh_t, t, side="right")) - 1, 0)
             pts = rec.mesh_local[k]
-            if rec.bag is not None:
-                c, q = rec.bag.at(t)
+            if rec.cargo is not None:
+                c, q = rec.cargo.at(t)
                 pts = c + rot.rotate(q, pts)
             sc.bag = Surface(pts, rec.mesh_faces)
     path = _latest(rec.paths, t)
@@ -80,9 +78,9 @@ def scene_at(rec: Recording, t: float, speed: float, t0: float, flash: float = F
     text = [f"t {t - t0:6.1f} s   playback x{speed:g}",
             f"speed {np.linalg.norm(vel):.3f} m/s"]
     k, robot_clear, bag_clear, touching = _contacts_at(rec, t, flash)
-    if rec.bag is not None:
+    if rec.cargo is not None:
         swing = swing_angle(rec, t)
-        what = f"cargo bag ({rec.bag_model})" if rec.bag_model else "cargo bag"
+        what = f"cargo bag ({rec.cargo_model})" if rec.cargo_model else "cargo bag"
         text.append(f"{what}: swing {math.degrees(swing):4.1f} deg" if swing is not None
                     else what)
         text.append(f"bag to wall {_fmt_m(bag_clear)}   robot to wall {_fmt_m(robot_clear)}")
@@ -109,7 +107,7 @@ def _latest(samples: list, t: float, max_age: float | None = None):
     return best[1]
 
 
-def _heading_from_path(rec: Recording, t: float, track: Track) -> np.ndarray | None:
+def _heading_from_path(rec: FlightTracks, t: float, track: Track) -> np.ndarray | None:
     """Direction to the robot's position 3 s later (at rest: towards where it will go)."""
     p0 = track.at(t)[0]
     for dt in (3.0, 10.0, 30.0):
@@ -128,10 +126,10 @@ class RenderResult:
     frames: int
     size: tuple[int, int]
     sim_seconds: float
-    bag_surface: str
+    cargo_surface: str
 
 
-def render(bag_dir: str | os.PathLike, out: str | os.PathLike, *, fps: float = DEFAULT_FPS,
+def render(recording: str | os.PathLike, out: str | os.PathLike, *, fps: float = DEFAULT_FPS,
            speed: float = DEFAULT_SPEED, scale: float = 1.0,
            log_window: tuple[float, float] | None = None, start: float = 0.0,
            duration: float | None = None, title: str = "",
@@ -142,7 +140,7 @@ def render(bag_dir: str | os.PathLike, out: str | os.PathLike, *, fps: float = D
     `scale` multiplies the default 896x384 frame; more than `max_frames` frames is refused."""
     from astrobee_sim.render import FlightRenderer, overview_camera
     out, kind = _output(out, fps, speed, scale)
-    rec = read_recording(bag_dir, log_window)
+    rec = read_tracks(recording, log_window)
     t_first, t0, t1 = _cut(rec, start, duration)
     n = frame_count(t1 - t0, fps, speed, max_frames)
     times = t0 + np.arange(n) * speed / fps
@@ -166,7 +164,7 @@ def render(bag_dir: str | os.PathLike, out: str | os.PathLike, *, fps: float = D
 @dataclass
 class Source:
     """One side of a comparison: a recording, optionally one leg's wall-clock window, a label."""
-    bag_dir: Path
+    recording: Path
     window: tuple[float, float] | None = None
     label: str = ""
 
@@ -183,7 +181,7 @@ def render_compare(sources: list[Source], out: str | os.PathLike, *, fps: float 
     if len(sources) < 2:
         raise RenderError("--compare needs two recordings (or two legs)")
     out, kind = _output(out, fps, speed, scale)
-    recs = [read_recording(s.bag_dir, s.window) for s in sources]
+    recs = [read_tracks(s.recording, s.window) for s in sources]
     cuts = [_cut(r, start, duration) for r in recs]
     length = max(t1 - t0 for _, t0, t1 in cuts)
     n = frame_count(length, fps, speed, max_frames)
@@ -230,7 +228,7 @@ def _output(out: str | os.PathLike, fps: float, speed: float, scale: float) -> t
     return out, kind
 
 
-def _cut(rec: Recording, start: float, duration: float | None) -> tuple[float, float, float]:
+def _cut(rec: FlightTracks, start: float, duration: float | None) -> tuple[float, float, float]:
     """(first pose time, first frame time, last frame time) of a recording cut by --start and
     --duration."""
     t_first, t_last = rec.span
@@ -242,7 +240,7 @@ def _cut(rec: Recording, start: float, duration: float | None) -> tuple[float, f
     return t_first, t0, t1
 
 
-def _extent(rec: Recording) -> np.ndarray:
+def _extent(rec: FlightTracks) -> np.ndarray:
     """Points the overview frames: every robot's track and the plans."""
     return np.vstack([tr.pos for tr in rec.robots.values()] + [p for _, p in rec.paths])
 
@@ -328,7 +326,7 @@ class _Gif:
 
 
 # ---- a demo run's legs -----------------------------------------------------------------------
-def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | None = None,
+def render_demo_legs(run_dir: str | os.PathLike, recording: str | os.PathLike | None = None,
                      **options: Any) -> list[Path]:
     """One video per leg of a run (runs/<t>/video_<scenario>.mp4, or video.mp4 for one leg),
     each leg cut from the recording by its wall-clock window in summary.json; the file name is
@@ -337,7 +335,7 @@ def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | No
     Returns the videos written."""
     from astrobee_bringup.summary import write_json
     run_dir = Path(run_dir)
-    bag_dir = Path(bag_dir) if bag_dir else run_dir / "bag"
+    recording = Path(recording) if recording else run_dir / "bag"
     path = run_dir / "summary.json"
     data = json.loads(path.read_text())
     legs = data.get("legs", [])
@@ -351,7 +349,7 @@ def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | No
             if not (math.isfinite(window[0]) and math.isfinite(window[1])
                     and window[1] > window[0]):
                 raise RenderError(f"empty leg: wall-clock window {window[0]:.3f}-{window[1]:.3f}")
-            render(bag_dir, run_dir / name, log_window=window,
+            render(recording, run_dir / name, log_window=window,
                    title=str(leg.get("scenario", "")), **options)
         except (RenderError, ValueError, ArithmeticError) as exc:
             leg["video_error"] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -363,21 +361,21 @@ def render_demo_legs(run_dir: str | os.PathLike, bag_dir: str | os.PathLike | No
 
 
 def render_demo_compare(run_dir: str | os.PathLike, scenarios: tuple[str, str],
-                        bag_dir: str | os.PathLike | None = None, name: str = "video_compare.mp4",
+                        recording: str | os.PathLike | None = None, name: str = "video_compare.mp4",
                         **options: Any) -> Path | None:
     """The two legs of a run flown in `scenarios` side by side (render_compare) into
     run_dir/name, noted in summary.json as `comparison` ({video, legs} or {error, legs}); None
     when the run has not both legs or they cannot be rendered."""
     from astrobee_bringup.summary import write_json
     run_dir = Path(run_dir)
-    bag_dir = Path(bag_dir) if bag_dir else run_dir / "bag"
+    recording = Path(recording) if recording else run_dir / "bag"
     path = run_dir / "summary.json"
     data = json.loads(path.read_text())
     legs = {leg.get("scenario"): leg for leg in data.get("legs", [])}
     if not all(s in legs and legs[s].get("wall_t0") is not None
                and legs[s].get("wall_t1") is not None for s in scenarios):
         return None
-    sources = [Source(bag_dir, (float(legs[s]["wall_t0"]), float(legs[s]["wall_t1"])), s)
+    sources = [Source(recording, (float(legs[s]["wall_t0"]), float(legs[s]["wall_t1"])), s)
                for s in scenarios]
     note: dict[str, Any] = {"legs": list(scenarios)}
     out = None
@@ -457,7 +455,7 @@ def main(argv: list[str]) -> int:
     except KeyboardInterrupt:
         return _fail("interrupted")
     print(f"{res.path}: {res.frames} frames {res.size[0]}x{res.size[1]}, "
-          f"{res.sim_seconds:.1f} s of flight, cargo bag surface: {res.bag_surface}")
+          f"{res.sim_seconds:.1f} s of flight, cargo bag surface: {res.cargo_surface}")
     return 0
 
 
@@ -467,9 +465,9 @@ def _source(spec: str) -> Source:
     if path and leg.isdigit() and not Path(spec).exists():
         window, scenario = _leg_window(Path(path), int(leg))
         return Source(Path(path), window, f"leg {leg}: {scenario}" if scenario else f"leg {leg}")
-    bag = Path(spec)
-    run = bag.resolve().parent.name if bag.name == "bag" else bag.name
-    return Source(bag, None, run)
+    recording = Path(spec)
+    run = recording.resolve().parent.name if recording.name == "bag" else recording.name
+    return Source(recording, None, run)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -479,8 +477,8 @@ class _Parser(argparse.ArgumentParser):
         raise RenderError(message)
 
 
-def _leg_window(bag: Path, leg: int) -> tuple[tuple[float, float], str]:
-    summary = bag.resolve().parent / "summary.json"
+def _leg_window(recording: Path, leg: int) -> tuple[tuple[float, float], str]:
+    summary = recording.resolve().parent / "summary.json"
     if not summary.is_file():
         raise RenderError(f"--leg needs {summary}")
     legs = json.loads(summary.read_text()).get("legs", [])
