@@ -2,11 +2,15 @@
 
 The flight (astrobee_lab.flight.Flight, in-process, truth state, the study's bump drawn from the
 same seed) is flown by PD along the planned leg until the oracle's window opens; from then on
-each tick commands the oracle's wrench for that interval (feed-forward) plus a PD feedback on
-the robot around the oracle's planned state (the pair's mass, the pair's inertia about its
-centre of mass, the flight mode's gains), boxed per axis. Judged as the verdict judges: over the
-last `hold` s before the budget ends the robot is within the goal's tolerances and at rest
-(|v| < 1 cm/s, |w| < 0.02 rad/s), and no contact happened.
+each tick commands the oracle's wrench for that tick (feed-forward) plus feedback, boxed per
+axis: `lqr` (default) a time-varying LQR on the pair model linearised along the oracle's
+solution, fed the robot's truth state and the FEM bag's fitted orientation and rate
+(tracking.py); `pd` the earlier PD on the robot alone around the planned robot state (pair mass,
+pair inertia, the mode's gains). Judged as the verdict judges: over the last `hold` s before the
+budget ends the robot is within the goal's tolerances and at rest (|v| < 1 cm/s, |w| < 0.02
+rad/s), and no contact happened. trace=True also returns, per tick, what the flight did against
+what the oracle predicted (robot and bag errors, the FEM nodes' and the predicted corners' wall
+clearance).
 """
 from __future__ import annotations
 
@@ -17,7 +21,8 @@ import numpy as np
 from astrobee import rotations as rot
 from astrobee_control import pair_model as pm
 
-from .solve import REST_OMEGA, REST_SPEED, Leg, OracleResult
+from . import tracking
+from .solve import REST_OMEGA, REST_SPEED, Leg, OracleResult, bag_corners
 
 
 def _reference(res: OracleResult, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -29,11 +34,26 @@ def _reference(res: OracleResult, t: float) -> tuple[np.ndarray, np.ndarray, np.
     return x[pm.P_R], x[pm.V_R], q, x[pm.W_R], res.u[k]
 
 
+def measured_state(truth: tuple, bag: Any, bag_offset: np.ndarray) -> np.ndarray:
+    """The pair state (26,) of the flight: the robot's truth, the FEM bag's fitted orientation
+    (times the start's robot-to-bag offset, so aligned at rest as the model) and body rate."""
+    p, q, v, w = truth
+    q = rot.normalize(np.asarray(q, float))
+    qb = rot.normalize(rot.multiply(rot.normalize(np.asarray(bag.orientation, float)), bag_offset))
+    wb = rot.rotate_inverse(qb, np.asarray(bag.omega, float))
+    return pm.state(np.asarray(p, float), np.asarray(v, float), q,
+                    rot.rotate_inverse(q, np.asarray(w, float)), qb, wb)
+
+
 def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude: float,
         nodes: int = 300, scenario: str = "node2_to_jem_bag", hold: float = 2.0,
-        pair_inertia=(0.43, 1.51, 1.66)) -> dict[str, Any]:
-    """Fly the oracle's plan `res` (see the module docstring); a row of what happened."""
+        feedback: str = "lqr", pair_inertia=(0.43, 1.51, 1.66), scale: dict | None = None,
+        trace: bool = False) -> dict[str, Any]:
+    """Fly the oracle's plan `res` (see the module docstring); a row of what happened (and
+    the per-tick trace under "trace" when asked)."""
     from astrobee_lab.flight import Flight
+    if feedback not in ("lqr", "pd"):
+        raise ValueError(f"feedback must be lqr or pd, got {feedback!r}")
     realism = {"disturbances": [{"target": "bag", "magnitude": float(magnitude), "duration": 0.2,
                                  "t_min": 10.0, "t_max": 30.0}]} if magnitude > 0 else None
     t_end = float(res.t[-1])
@@ -41,27 +61,38 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
                 state_source="truth", realism=realism, task={"time_limit": t_end + 5.0})
     mode = fl.mode
     lim = np.concatenate([mode.max_force, mode.max_torque])
+    fl.reset()
+    name = fl.names[0]
+    # the FEM bag's fitted frame against the robot's at the start (the model's rest: aligned)
+    q0 = rot.normalize(np.asarray(fl._truth[name][1], float))
+    bag_offset = rot.multiply(rot.conjugate(rot.normalize(np.asarray(fl._bag.orientation, float))), q0)
+    track = tracking.plan(res, params, lim, 1.0 / 62.5, scale) if feedback == "lqr" else None
     M = params.robot_mass + params.bag_mass
     J = np.asarray(pair_inertia, float)
     kp, kd = np.asarray(mode.pos_kp, float), np.asarray(mode.vel_kd, float)
     akp, akd = np.asarray(mode.att_kp, float), np.asarray(mode.omega_kd, float)
-    fl.reset()
-    name = fl.names[0]
-    contacts, clearance, tail = 0, np.inf, []
+    corners = bag_corners(leg.bag_size)
+    world = fl.sim.world
+    contacts, clearance, tail, rows = 0, np.inf, [], []
     while fl.sim.time < t_end - 1e-9:
         t = fl.sim.time
         if t < res.t[0]:
             _, sample = fl.step()
         else:
-            p, q, v, w = fl._truth[name]
-            q = rot.normalize(np.asarray(q, float))
-            pr, vr, qr, wr, uff = _reference(res, t)
-            f_w = M * (kp * (pr - p) + kd * (vr - v))
-            e = rot.to_rotvec(rot.multiply(rot.conjugate(q), qr))
-            w_b = rot.rotate_inverse(q, np.asarray(w, float))
-            tau = J * (akp * e + akd * (wr - w_b))
-            cmd = np.clip(uff + np.concatenate([rot.rotate_inverse(q, f_w), tau]), -lim, lim)
+            x = measured_state(fl._truth[name], fl._bag, bag_offset)
+            if track is not None:
+                cmd = track.command(x, t, lim)
+            else:
+                p, q, v, w_b = x[pm.P_R], x[pm.Q_R], x[pm.V_R], x[pm.W_R]
+                pr, vr, qr, wr, uff = _reference(res, t)
+                f_w = M * (kp * (pr - p) + kd * (vr - v))
+                e = rot.to_rotvec(rot.multiply(rot.conjugate(q), qr))
+                tau = J * (akp * e + akd * (wr - w_b))
+                cmd = np.clip(uff + np.concatenate([rot.rotate_inverse(q, f_w), tau]), -lim, lim)
             _, sample = fl.step(cmd, mode="replace")
+            if trace:
+                rows.append({**_trace_row(fl, name, res, track, params, corners, world, bag_offset),
+                             "cmd": cmd})
         contacts += int(sample.contacts)
         clearance = min(clearance, float(sample.bag_clearance))
         if fl.sim.time >= t_end - hold - 1e-9:
@@ -76,7 +107,39 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
     goal, att, speed, omega = tail.max(axis=0)
     ok = bool(goal <= mode.tolerance_pos and att <= mode.tolerance_att and speed < REST_SPEED
               and omega < REST_OMEGA and contacts == 0)
-    return {"flown_success": ok, "flown_goal": round(float(goal), 4), "flown_attitude": round(float(att), 4),
-            "flown_speed": round(float(speed), 4), "flown_omega": round(float(omega), 4),
-            "flown_contacts": contacts, "flown_min_bag_clearance": round(float(clearance), 4),
-            "bump_seen": log[0]["force"] if log else None}
+    out = {"feedback": feedback, "flown_success": ok, "flown_goal": round(float(goal), 4),
+           "flown_attitude": round(float(att), 4), "flown_speed": round(float(speed), 4),
+           "flown_omega": round(float(omega), 4), "flown_contacts": contacts,
+           "flown_min_bag_clearance": round(float(clearance), 4),
+           "bump_seen": log[0]["force"] if log else None}
+    if trace:
+        out["trace"] = {k: np.array([r[k] for r in rows]) for k in rows[0]} if rows else {}
+    return out
+
+
+def _trace_row(fl: Any, name: str, res: OracleResult, track: Any, params: pm.PairParams,
+               corners: np.ndarray, world: Any, bag_offset: np.ndarray) -> dict:
+    """One tick: the flight against the oracle's prediction at the same time."""
+    t = fl.sim.time
+    x = measured_state(fl._truth[name], fl._bag, bag_offset)
+    if track is not None:
+        ref = track.x[track.index(t)]
+    else:
+        k = int(np.clip(np.searchsorted(res.t, t, side="right") - 1, 0, len(res.x) - 1))
+        ref = res.x[k]
+    e = tracking.error(x[None], ref[None], False)[0]
+    pb_ref, _ = pm.bag_centre(ref, params)
+    pb_mod, _ = pm.bag_centre(x, params)         # where the model puts the bag for this state
+    pts = fl.sim.bag_points()
+    centre = np.asarray(fl._bag.position, float)         # the mesh frame's origin: the box centre
+    Rb = pm.rotation(ref[pm.Q_B])
+    pred = pb_ref + corners @ Rb.T
+    return {"t": t, "pos_err": float(np.linalg.norm(e[0:3])), "att_err": float(np.linalg.norm(e[6:9])),
+            "bag_att_err": float(np.linalg.norm(e[12:15])),
+            "bag_centre_err": float(np.linalg.norm(centre - pb_ref)),
+            "bag_model_err": float(np.linalg.norm(centre - pb_mod)),
+            "swing": float(rot.angle_between(x[pm.Q_R], x[pm.Q_B])),
+            "swing_ref": float(rot.angle_between(ref[pm.Q_R], ref[pm.Q_B])),
+            "node_clearance": float(world.clearance(pts)),
+            "corner_clearance_ref": float(world.clearance(pred)),
+            "deform": float(fl._bag.deformation), "x": x}
