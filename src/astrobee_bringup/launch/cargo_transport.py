@@ -19,14 +19,16 @@ safety filter) per robot of the scenario, in the robot's namespace (`bumble/pd_c
 publishes /bumble/gnc/ctl/command); with a bag held by several robots each controller takes
 its share of the bag's mass. video (true | false:
 render one MP4 per leg into the run folder, default: with demo), demo (true: fly DEMO_LEGS
-in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag (the FEM
-bag, fast solver) with PD, then node2_to_jem_fem_bag_mpc: the FEM bag flown by the sampling MPC).
+in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag_bump (the
+FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) with PD, then
+node2_to_jem_fem_bag_wmpc: the same carry, seed and bump flown by the predictive controller over
+the wrench; video_compare.mp4 shows the two carries side by side).
 
 Controllers: each robot gets the controller its scenario names (`controller:` in the scenario
 file, pd when it names none; an explicit controller:= argument applies to every robot). A
 per-robot controller, rather than a second graph run or a switch inside one controller node,
-keeps the demo one graph, one recording, one summary.json: the MPC leg's robot (queen) has its
-own mpc_controller_node in /queen, while the PD node of the default robot waits on topics no
+keeps the demo one graph, one recording, one summary.json: the wmpc leg's robot (queen) has its
+own wmpc_controller_node in /queen, while the PD node of the default robot waits on topics no
 sim publishes during that leg, as every Astrobee runs its own controller.
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 With the mission running, the controller's death does not end the launch by itself: the sim's
@@ -50,9 +52,11 @@ from astrobee_bringup.process_group import LaunchError, NodeSpec
 from astrobee_control import registry
 
 
-DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
+# no bag (PD); the FEM bag on the strap grasp with a 5 N bump on the bag drawn from the seed,
+# flown by PD and then, the same seed and bump, by the predictive controller over the wrench
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_wmpc")
 # the same carry by two controllers, side by side in video_compare.mp4 (render_demo_compare)
-DEMO_COMPARE = ("node2_to_jem_fem_bag", "node2_to_jem_fem_bag_mpc")
+DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_wmpc")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
 SAFETY_DEFAULT = "true"
@@ -76,7 +80,8 @@ ARGUMENTS = {
                "the controller's process) | node (a safety_filter_node of its own, for a "
                "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
-    "demo": ("false", "fly DEMO_LEGS (no bag, FEM bag with PD, FEM bag with MPC), the sim reset between"),
+    "demo": ("false", "fly DEMO_LEGS (no bag; the FEM bag with a 5 N bump by PD, then by "
+                      "wmpc: the same seed, the same bump), the sim reset between"),
     "bag_model": ("", f"scenario override: {' | '.join(BAG_MODELS + (NO_BAG,))}"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
@@ -271,6 +276,8 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         if handover:
             args += ["--handover"] + (["--await-recorder"] if ctx.flag("record", True) else [])
+        if demo:                        # the PD leg is there to fail where wmpc does not
+            args += ["--keep-going"]
         nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
                               command=["run", "astrobee_bringup", "mission", *args],
                               ros2_command=[sys.executable, "-m", "astrobee_bringup.mission", *args]))

@@ -22,9 +22,12 @@ from .result import Interrupted, LegResult, finish_leg, write_outputs
 def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                 argv: list[str] | None = None, wall_timeout: float = 600.0,
                 ready_timeout: float = 90.0, stream=None, handover: bool = False,
-                await_recorder: bool = False, settle_budget: float = SETTLE_BUDGET) -> int:
+                await_recorder: bool = False, settle_budget: float = SETTLE_BUDGET,
+                keep_going: bool = False) -> int:
     """Fly the scenarios in order in the running graph; write run_dir/summary.json + plots.
-    Returns the process exit status (0 all legs succeeded, 1 failure, 130 interrupted)."""
+    Returns the process exit status (0 all legs succeeded, 1 failure, 130 interrupted; with
+    keep_going every leg is flown whatever the verdict before it, and 0 says they all were:
+    the verdicts are in summary.json, as the demo's PD-then-wmpc comparison wants)."""
     from roszen import runtime as roszen
 
     stop = {"flag": False}
@@ -70,7 +73,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
             progress.done(f"[mission] {name}: {'SUCCESS' if res.success else 'FAILED'}: {res.reason}"
                           + (f" ({res.duration:.1f} s sim, {res.real_time_factor:.1f}x real time)"
                              if res.duration is not None and res.real_time_factor else ""))
-            if not res.success:
+            if not res.success and not keep_going:
                 code = 1
                 status = "failed"
                 break
@@ -129,6 +132,9 @@ def _main(argv: list[str] | None) -> int:
     p.add_argument("--settle-budget", type=float, default=SETTLE_BUDGET,
                    help="s a leg may run past its plan's end to come to rest at its goal "
                         f"(default {SETTLE_BUDGET:g})")
+    p.add_argument("--keep-going", action="store_true",
+                   help="fly every leg whatever the verdict of the one before (exit 0 when all "
+                        "were flown; the verdicts are in summary.json)")
     a = p.parse_args(own)
     if not (math.isfinite(a.settle_budget) and a.settle_budget >= 0):
         p.error(f"--settle-budget must be >= 0 s, got {a.settle_budget:g}")
@@ -141,4 +147,4 @@ def _main(argv: list[str] | None) -> int:
     run_dir = Path(a.run_dir) if a.run_dir else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     return run_mission(a.scenario, run_dir, a.namespace, ["mission", *ros], wall_timeout=a.timeout,
                        handover=a.handover, await_recorder=a.await_recorder,
-                       settle_budget=a.settle_budget)
+                       settle_budget=a.settle_budget, keep_going=a.keep_going)
