@@ -96,7 +96,7 @@ def test_an_oracle_without_results_is_said_and_bad_settings_are_one_line(tmp_pat
         assert needle in str(e.value) and "\n" not in str(e.value)
 
 
-def test_the_pair_control_study_file_reads(monkeypatch):
+def test_the_pair_control_study_file_reads():
     root = Path(__file__).resolve().parents[2]
     path = root / "studies" / "pair_control_study.yaml"
     if not path.is_file():
