@@ -1,8 +1,10 @@
 """The nodes on real rclpy + rmw_fastrtps_cpp (ASTROBEE_RUNTIME=rclpy; `make test-rclpy` runs
 this in .venv-rclpy): sim_node (rigid backend, lockstep, a rigid bag), planner_node, the PD
-controller and the mission, each its own process, fly a short hop to success, and a plain rclpy
+controller and the mission, each its own process, fly a short hop to success; a plain rclpy
 subscriber (rosidl's generated classes, no project code) hears /loc/truth/pose and
-/sim/bag/state. Skipped where rclpy or the built astrobee_msgs cannot be imported."""
+/sim/bag/state; the recorder on rclpy (roszen.rclpy_backend.record) writes a bag that
+mcap-ros2-support decodes whole. Skipped where rclpy or the built astrobee_msgs cannot be
+imported."""
 from __future__ import annotations
 
 import json
@@ -87,6 +89,8 @@ def test_hop_on_rclpy_fastrtps(tmp_path):
                                     start_new_session=True)
         procs.append(listener)
         for i, argv in enumerate((
+                [py, "-m", "roszen.rclpy_backend.record", "-a", "--use-sim-time", "-o",
+                 str(run / "bag")],
                 [py, "-m", "astrobee_sim.sim_node", "--ros-args", "-p", "backend:=rigid",
                  "-p", "scenario:=hop", "-p", "clock_mode:=lockstep"],
                 [py, "-m", "astrobee_planning.planner_node"],
@@ -105,7 +109,7 @@ def test_hop_on_rclpy_fastrtps(tmp_path):
             testing.stop(p, timeout=5.0)
         for log in logs:
             log.close()
-    node_logs = "\n".join((tmp_path / f"node{i}.log").read_text()[-3000:] for i in range(3))
+    node_logs = "\n".join((tmp_path / f"node{i}.log").read_text()[-3000:] for i in range(4))
     assert mission.returncode == 0, mission.stdout[-3000:] + mission.stderr[-3000:] + node_logs
     summary = json.loads((run / "summary.json").read_text())
     assert summary["success"] and summary["contacts"] == 0, summary.get("reason")
@@ -115,3 +119,15 @@ def test_hop_on_rclpy_fastrtps(tmp_path):
     assert heard["bag_model"] == "rigid"
     assert sum((a - b) ** 2 for a, b in zip(heard["last"], GOAL)) ** 0.5 < 0.2, heard
     assert all(p.poll() is not None for p in procs)
+
+    from mcap_ros2.reader import read_ros2_messages
+    topics: dict = {}
+    for f in sorted((run / "bag").glob("*.mcap")):
+        for m in read_ros2_messages(str(f)):          # every message decodes
+            topics.setdefault(m.channel.topic, []).append(m.ros_msg)
+    assert {"/clock", "/tf", "/gnc/ctl/command", "/gnc/ctl/segment", "/mob/state",
+            "/sim/scenario"} <= set(topics), sorted(topics)
+    assert topics["/sim/bag/state"][-1].model == "rigid"
+    p = topics["/loc/truth/pose"][-1].pose.position
+    assert sum((a - b) ** 2 for a, b in zip([p.x, p.y, p.z], GOAL)) ** 0.5 < 0.2
+    assert topics["/mob/state"][-1].state == 2                  # reached

@@ -18,11 +18,11 @@ from .bridge import from_rosidl, guarded, rclpy_qos, rosidl_class, to_rosidl, ty
 from .params import RclpyParameters
 
 
-def ensure_init(argv: Optional[Sequence[str]] = None) -> None:
+def ensure_init(argv: Optional[Sequence[str]] = None, **kw: Any) -> None:
     """rclpy.init once per process, with the process's --ros-args (remaps, -p, params files)."""
     import rclpy
     if not rclpy.ok():
-        rclpy.init(args=list(argv) if argv else None)
+        rclpy.init(args=list(argv) if argv else None, **kw)
 
 
 class Clock:
@@ -58,12 +58,23 @@ def wall_clock(use_sim_time: bool = False) -> Clock:
 
 
 class EndpointInfo:
-    """rclpy's TopicEndpointInfo with roszen's `node_fqn`."""
+    """rclpy's TopicEndpointInfo with roszen's `node_fqn`, `ros_type`, `qos` (a roszen profile;
+    what DDS discovery does not tell, roszen's defaults), `type_hash` ('': not checked) and
+    `token` (a key naming the endpoint)."""
 
-    def __init__(self, info: Any) -> None:
+    def __init__(self, info: Any, topic: str = "") -> None:
+        from ..qos import Durability, QoSProfile, Reliability
         self.info = info
         ns = info.node_namespace.rstrip("/")
         self.node_fqn = f"{ns}/{info.node_name}"
+        self.ros_type = info.topic_type
+        q = info.qos_profile
+        rel, dur = int(q.reliability), int(q.durability)
+        self.qos = QoSProfile(depth=max(int(q.depth), 1),
+                              reliability=Reliability(rel) if rel in (1, 2) else Reliability.RELIABLE,
+                              durability=Durability(dur) if dur in (1, 2) else Durability.VOLATILE)
+        self.type_hash = ""
+        self.token = f"{self.node_fqn} {topic}"
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.info, name)
@@ -227,6 +238,12 @@ class Node(RclpyParameters):
             timer_period_sec, guarded(callback, self.get_logger(), "timer", self._runs),
             callback_group, clock=rclock)
 
+    def destroy_subscription(self, sub: Any) -> bool:
+        return self._rnode.destroy_subscription(sub)
+
+    def destroy_publisher(self, pub: Any) -> bool:
+        return self._rnode.destroy_publisher(pub._pub if isinstance(pub, Publisher) else pub)
+
     # -- graph ------------------------------------------------------------------------------
     def count_publishers(self, topic: str) -> int:
         return self._rnode.count_publishers(topic)
@@ -247,12 +264,12 @@ class Node(RclpyParameters):
         return self._rnode.get_service_names_and_types()
 
     def get_publishers_info_by_topic(self, topic: str) -> list:
-        return [EndpointInfo(i) for i in self._rnode.get_publishers_info_by_topic(
-            self.resolve_topic_name(topic))]
+        topic = self.resolve_topic_name(topic)
+        return [EndpointInfo(i, topic) for i in self._rnode.get_publishers_info_by_topic(topic)]
 
     def get_subscriptions_info_by_topic(self, topic: str) -> list:
-        return [EndpointInfo(i) for i in self._rnode.get_subscriptions_info_by_topic(
-            self.resolve_topic_name(topic))]
+        topic = self.resolve_topic_name(topic)
+        return [EndpointInfo(i, topic) for i in self._rnode.get_subscriptions_info_by_topic(topic)]
 
     # -- spinning ---------------------------------------------------------------------------
     def spin_once(self, timeout_sec: Optional[float] = None) -> bool:
