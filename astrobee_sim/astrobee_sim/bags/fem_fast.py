@@ -18,8 +18,8 @@ from astrobee import config
 from astrobee import rotations as rot
 
 from .base import Bag, BagState, quat_from_matrix
-from ..grasp import twist_forces, twist_weights
-from .mass_spring import Anchors, MassSpring, Tethers
+from ..grasp import twist_weights
+from .mass_spring import Anchors, MassSpring, Tethers, Twists
 from .mesh import bag_mesh
 from .node_contacts import collide_moving_boxes, collide_static_boxes, grow_boxes
 
@@ -87,6 +87,7 @@ class FastFemBag(Bag):
         self._grasps: list[dict] = []                 # robot, nodes, offsets (gripper frame)
         self._anchors: Anchors | None = None
         self._tethers: Tethers | None = None
+        self._twists: Twists | None = None            # the straps' twist springs
         self._target = self._target_vel = None
         self._tether_target = self._tether_vel = None
         self._pending: list = []                      # per robot: (id, link, F, at, tau, Fc, com, tauc)
@@ -155,6 +156,7 @@ class FastFemBag(Bag):
         self._grasps = []
         self._anchors = None
         self._tethers = None
+        self._twists = None
         self._tether_target = self._tether_vel = None
         self._pending = []
         self.attached = [False] * len(self.handles)
@@ -170,6 +172,10 @@ class FastFemBag(Bag):
                                                   for _ in h.tethers]),
                                 np.array([h.tether_damping for h in holds for _ in h.tethers])
                                 ) if groups else None
+        twisted = [h for h in holds if h.twist is not None]
+        self._twists = Twists([h.twist for h in twisted],
+                              np.array([h.twist_stiffness for h in twisted]),
+                              np.array([h.twist_damping for h in twisted])) if twisted else None
 
     def _targets(self) -> list:
         """Anchor and tether targets and their velocities from the grippers' current state;
@@ -208,20 +214,17 @@ class FastFemBag(Bag):
         self._t += dt
         x, v = self.x, self.v
         grip = self._targets() if self._grasps else []
-        external, twist_tau = self.external, []
-        for g, (_, R, w) in zip(self._grasps, grip):
-            hold = g["hold"]
-            if hold.twist is None:
-                twist_tau.append(None)
-                continue
-            fa, tau = twist_forces(x, v, g["tw"], (R @ g["n"])[None], (R @ g["u"])[None],
-                                   w[None], hold.twist_stiffness, hold.twist_damping)
-            spread = g["tw"][:, None, None] * fa[None]
-            external = spread if external is None else external + spread
-            twist_tau.append(tau[0])
+        frames = None
+        if self._twists is not None:          # per twist: normal, rest axis, gripper omega
+            frames = np.array([np.concatenate([R @ g["n"], R @ g["u"], w])
+                               for g, (_, R, w) in zip(self._grasps, grip)
+                               if g["hold"].twist is not None])[:, None, :]
         x_prev = x.copy()
-        self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel, external,
-                          self._tethers, self._tether_target, self._tether_vel)
+        taus = self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel,
+                                 self.external, self._tethers, self._tether_target,
+                                 self._tether_vel, self._twists, frames)
+        taus = iter(() if taus is None else taus[:, 0])
+        twist_tau = [next(taus) if g["hold"].twist is not None else None for g in self._grasps]
         flat_x, flat_v = x.reshape(-1, 3), v.reshape(-1, 3)
         self.last_penetration = collide_static_boxes(flat_x, flat_v, x_prev.reshape(-1, 3),
                                                      self.walls, self.margin, self.friction,
@@ -238,7 +241,9 @@ class FastFemBag(Bag):
             pending.append([r.id, None, None, None, None,
                             fc[0].tolist() if fc.any() else None, pos.tolist(), tc[0].tolist()])
         if self._grasps:
-            fa = self.springs.anchor_forces(x, v, self._anchors, self._target, self._target_vel)[:, 0]
+            fa = (self.springs.anchor_forces(x, v, self._anchors, self._target,
+                                             self._target_vel)[:, 0]
+                  if len(self._anchors.nodes) else np.zeros((0, 3)))
             ft = (self.springs.tether_forces(x, v, self._tethers, self._tether_target,
                                              self._tether_vel)[:, 0]
                   if self._tethers is not None else np.zeros((0, 3)))

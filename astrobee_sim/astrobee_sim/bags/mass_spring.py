@@ -20,7 +20,9 @@ right-hand sides of the same solve.
 
 The per-edge work (spring forces at x + h v, the cross-damping correction, the scatter onto the
 nodes) is one numba loop when numba is installed (~4x less than the sparse products and ~10
-whole-array numpy operations it replaces, the same sums to 1e-15), else numpy.
+whole-array numpy operations it replaces, the same sums to 1e-15), else numpy; so is the grasp's
+work on the held nodes (tethers, the strap's twist spring, the tethers' low-rank solve:
+hold_kernels).
 
 Arrays: node positions and velocities are (N, K, 3) (node, copy, axis), C-contiguous so that
 reshape(N, 3K) is free. No pybullet here.
@@ -32,6 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
+
+from . import hold_kernels
+from ..grasp import twist_forces, twist_weights
 
 try:
     from numba import njit
@@ -84,6 +89,7 @@ def warm_up() -> None:
     from .node_contacts import _near_boxes
     if _near_boxes is not None:
         _near_boxes(np.zeros((2, 3)), np.zeros((1, 6)))
+    hold_kernels.warm_up()
     _warm = True
 
 
@@ -123,13 +129,18 @@ class _LowRank:
     dense blocks). The group sums are gathers over the few group nodes and the correction is
     elementwise, so each copy's columns see the same arithmetic (equal copies stay equal)."""
 
-    def __init__(self, base, groups: list, w: np.ndarray, d: np.ndarray):
+    def __init__(self, base, groups: list, w: np.ndarray, d: np.ndarray, compiled: bool = True):
         self.base, self.groups, self.w = base, [np.asarray(g) for g in groups], w
-        self.z = np.asarray(base.solve(np.ascontiguousarray(w.T)))          # (N, G)
+        self.z = np.ascontiguousarray(base.solve(np.ascontiguousarray(w.T)))   # (N, G)
         self.s = np.linalg.inv(np.diag(1.0 / d) + w @ self.z)               # (G, G)
+        self.packed = hold_kernels.pack_groups(self.groups)
+        self.compiled = compiled and hold_kernels.lowrank_update is not None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         y = self.base.solve(b)
+        if self.compiled:                       # one pass over the group nodes and the columns
+            hold_kernels.lowrank_update(y, self.z, self.s, *self.packed)
+            return y
         if y.shape[1] <= 3:                     # one copy: BLAS (no copies to keep equal)
             return y - self.z @ (self.s @ (self.w @ y))
         t = [y[g].mean(axis=0) for g in self.groups]
@@ -145,6 +156,10 @@ def _means(groups: list, y: np.ndarray) -> np.ndarray:
     """(G, K, 3) centroids of y (N, K, 3) over each node group (gathers: cheap, and equal
     copies summed alike)."""
     return np.stack([y[g].mean(axis=0) for g in groups])
+
+
+_NO_GROUPS = (np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0), np.zeros(0))
+_NO_TWISTS = _NO_GROUPS
 
 
 @dataclass
@@ -181,6 +196,46 @@ class Tethers:
                 w[i, np.asarray(g)] = 1.0 / len(g)
             self._w = w
         return w
+
+    def packed(self) -> tuple:
+        """(nodes, ptr, stiffness, damping) as the compiled loops take them (cached)."""
+        if getattr(self, "_packed", None) is None:
+            self._packed = (*hold_kernels.pack_groups(self.groups),
+                            np.ascontiguousarray(self.stiffness, dtype=float),
+                            np.ascontiguousarray(self.damping, dtype=float))
+        return self._packed
+
+
+@dataclass
+class Twists:
+    """The strap's twist springs (astrobee_sim.grasp.twist_forces), one per held handle: a
+    torque about the handle normal between the strap's two halves (node groups a and b),
+    -(k angle + c rate) n, as a force on a's centroid and its opposite on b's. The holder
+    gives each step the frames (T, K, 9): the normal n, the strap's rest long axis u (both
+    carried by the gripper) and the gripper's angular velocity."""
+    halves: list              # T pairs (a, b) of node index arrays
+    stiffness: np.ndarray     # (T,) N m/rad
+    damping: np.ndarray       # (T,) N m s/rad
+
+    def packed(self) -> tuple:
+        """(nodes, ptr, stiffness, damping): groups 2t and 2t + 1 are twist t's halves."""
+        if getattr(self, "_packed", None) is None:
+            self._packed = (*hold_kernels.pack_groups([g for ab in self.halves for g in ab]),
+                            np.ascontiguousarray(self.stiffness, dtype=float),
+                            np.ascontiguousarray(self.damping, dtype=float))
+        return self._packed
+
+    def numpy_forces(self, x: np.ndarray, v: np.ndarray, frames: np.ndarray) -> list:
+        """Per twist: (weights (N,), force on a's centroid (K, 3), torque on the gripper (K, 3)),
+        by grasp.twist_forces (the path without numba)."""
+        out = []
+        for t, (a, b) in enumerate(self.halves):
+            w = twist_weights(len(x), a, b)
+            fa, tau = twist_forces(x, v, w, frames[t, :, 0:3], frames[t, :, 3:6],
+                                   frames[t, :, 6:9], float(self.stiffness[t]),
+                                   float(self.damping[t]))
+            out.append((w, fa, tau))
+        return out
 
 
 class MassSpring:
@@ -258,12 +313,13 @@ class MassSpring:
         SuperLU's column-by-column triangular solves at K = 64)."""
         dense = columns >= 48 and self.n <= 3000
         if tethers is not None and len(tethers.groups):
-            key = (h, None if anchors is None else anchors.key(), dense, tethers.key())
+            key = (h, None if anchors is None else anchors.key(), dense, tethers.key(),
+                   self.use_numba)
             lu = self._lu.get(key)
             if lu is None:
                 lu = _LowRank(self.solver(h, anchors, columns), tethers.groups,
                               tethers.weights(self.n),
-                              h * h * tethers.stiffness + h * tethers.damping)
+                              h * h * tethers.stiffness + h * tethers.damping, self.use_numba)
                 self._lu[key] = lu
             return lu
         key = (h, None if anchors is None else anchors.key(), dense)
@@ -287,12 +343,15 @@ class MassSpring:
              target: np.ndarray | None = None, target_vel: np.ndarray | None = None,
              external: np.ndarray | None = None, tethers: Tethers | None = None,
              tether_target: np.ndarray | None = None,
-             tether_vel: np.ndarray | None = None) -> None:
+             tether_vel: np.ndarray | None = None, twists: Twists | None = None,
+             twist_frames: np.ndarray | None = None) -> np.ndarray | None:
         """One step in place: v <- solve(M v + h f(x) + anchor terms), x <- x + h v.
 
         target / target_vel: (A, K, 3) where each anchored node is pulled to / moves with.
         external: optional (N, K, 3) extra forces held over the step.
-        tethers: node groups held by their centroids at tether_target / tether_vel (G, K, 3)."""
+        tethers: node groups held by their centroids at tether_target / tether_vel (G, K, 3).
+        twists: the strap's twist springs, with their frames (T, K, 9) (Twists).
+        Returns the twist springs' torques on the grippers (T, K, 3), or None without twists."""
         n, k, _ = x.shape
         across = self.damping_mode == "spring" and self.damping > 0
         u = None
@@ -315,11 +374,8 @@ class MassSpring:
             idx = anchors.nodes
             rhs[idx] += h * (anchors.stiffness[:, None, None] * (target - x[idx])
                              + anchors.damping[:, None, None] * target_vel)
-        if tethers is not None:
-            f = (tethers.stiffness[:, None, None] * (tether_target - _means(tethers.groups, x))
-                 + tethers.damping[:, None, None] * tether_vel)
-            for i, g in enumerate(tethers.groups):
-                rhs[g] += (h / len(g)) * f[i]
+        twist_tau = self._hold_rhs(rhs, x, v, h, tethers, tether_target, tether_vel, twists,
+                                   twist_frames)
         lu = self.solver(h, anchors, 3 * k, tethers)
         new = lu.solve(rhs.reshape(n, 3 * k)).reshape(n, k, 3)
         if u is not None and self.damping_iterations > 1:
@@ -329,6 +385,36 @@ class MassSpring:
                 new = lu.solve(corr.reshape(n, 3 * k)).reshape(n, k, 3)
         v[...] = new
         x += h * v
+        return twist_tau
+
+    def _hold_rhs(self, rhs, x, v, h, tethers, tether_target, tether_vel, twists,
+                  twist_frames) -> np.ndarray | None:
+        """Adds the tethers' explicit spring terms and the twist springs' forces (times h) to
+        rhs; returns the twist torques on the grippers (T, K, 3) or None."""
+        if tethers is None and twists is None:
+            return None
+        k = x.shape[1]
+        if self.use_numba:
+            gn, gp, gk, gc = tethers.packed() if tethers is not None else _NO_GROUPS
+            tt = tv = np.zeros((0, k, 3))
+            if tethers is not None:
+                tt, tv = tether_target, tether_vel
+            wn, wp, wk, wc = twists.packed() if twists is not None else _NO_TWISTS
+            fr = twist_frames if twists is not None else np.zeros((0, k, 9))
+            tau = hold_kernels.hold_rhs(rhs, x, v, h, gn, gp, gk, gc, tt, tv, wn, wp, wk, wc, fr)
+            return tau if twists is not None else None
+        if tethers is not None:
+            f = (tethers.stiffness[:, None, None] * (tether_target - _means(tethers.groups, x))
+                 + tethers.damping[:, None, None] * tether_vel)
+            for i, g in enumerate(tethers.groups):
+                rhs[g] += (h / len(g)) * f[i]
+        if twists is None:
+            return None
+        taus = []
+        for w, fa, tau in twists.numpy_forces(x, v, twist_frames):
+            rhs += (h * w)[:, None, None] * fa[None]
+            taus.append(tau)
+        return np.stack(taus)
 
     def anchor_forces(self, x: np.ndarray, v: np.ndarray, anchors: Anchors, target: np.ndarray,
                       target_vel: np.ndarray) -> np.ndarray:
@@ -340,6 +426,8 @@ class MassSpring:
     def tether_forces(self, x: np.ndarray, v: np.ndarray, tethers: Tethers, target: np.ndarray,
                       target_vel: np.ndarray) -> np.ndarray:
         """(G, K, 3) force each tether exerts on what holds it (the gripper)."""
+        if self.use_numba:
+            return hold_kernels.tether_pull(x, v, *tethers.packed(), target, target_vel)
         xm, vm = _means(tethers.groups, x), _means(tethers.groups, v)
         return (tethers.stiffness[:, None, None] * (xm - target)
                 + tethers.damping[:, None, None] * (vm - target_vel))
