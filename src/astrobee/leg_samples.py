@@ -38,7 +38,7 @@ class LegSamples:
         self.ref: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {r: {} for r in self.robots}
         self.mode: dict[str, dict[int, int]] = {r: {} for r in self.robots}
         self.contacts: dict[int, tuple[int, tuple[str, ...], tuple[str, ...], float, float]] = {}
-        self.bag_v: dict[int, np.ndarray] = {}
+        self.cargo_v: dict[int, np.ndarray] = {}
         self.faults: dict[str, list[tuple[int, str]]] = {r: [] for r in self.robots}
         self._order: list[int] = []          # the first robot's pose stamps, sorted
         self._live_last = -1
@@ -67,8 +67,8 @@ class LegSamples:
             tuple(sorted({str(c.body_a) for c in msg.contacts})),
             float(msg.robot_clearance), float(msg.bag_clearance))
 
-    def add_bag(self, msg: Any) -> None:
-        self.bag_v[mc.stamp_ns(msg.header.stamp)] = _v(msg.velocity)
+    def add_cargo(self, msg: Any) -> None:
+        self.cargo_v[mc.stamp_ns(msg.header.stamp)] = _v(msg.velocity)
 
     def add_fault(self, robot: str, msg: Any) -> None:
         if msg.active:
@@ -95,8 +95,8 @@ class LegSamples:
         c = self.contacts.get(t)
         faults = {r: tuple(dict.fromkeys(text for ft, text in self.faults[r] if ft <= t))
                   for r in self.robots}
-        bag, tw = self.bag_v.get(t), vel.get(self.first)
-        speed = (float(np.linalg.norm(bag - tw[0])) if bag is not None and tw is not None
+        cargo, tw = self.cargo_v.get(t), vel.get(self.first)
+        speed = (float(np.linalg.norm(cargo - tw[0])) if cargo is not None and tw is not None
                  else float("nan"))
         return TaskSample(
             t=t * 1e-9, poses=poses, velocities=vel or None,

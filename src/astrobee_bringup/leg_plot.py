@@ -85,7 +85,7 @@ def plot(series: "Series | dict[str, Series]", path: str | os.PathLike, boxes: n
     first = per[names[0]]
     arrays = {n: (np.asarray(s.position, float).reshape(-1, 3),
                   np.asarray(s.ref_position, float).reshape(-1, 3)) for n, s in per.items()}
-    cargo = np.asarray(first.bag_position, float).reshape(-1, 3)
+    cargo = np.asarray(first.cargo_position, float).reshape(-1, 3)
     ends = [np.asarray(r[k][:3], float)[None] for r in info.values() for k in ("start", "goal")
             if len(r.get(k) or []) >= 3]     # the whole route is in view, even when cut short
     pts = np.vstack([a for pr in arrays.values() for a in pr if len(a)]
@@ -186,7 +186,7 @@ def plot(series: "Series | dict[str, Series]", path: str | os.PathLike, boxes: n
     if first.clear_t:
         tt = np.asarray(first.clear_t) - t0
         rc = np.asarray(first.robot_clearance, float)
-        bc = np.asarray(first.bag_clearance, float)
+        bc = np.asarray(first.cargo_clearance, float)
         ax.plot(tt, np.where(rc >= 0, rc, np.nan), color="tab:blue",
                 label="robots (nearest)" if len(names) > 1 else "robot")
         if np.any(bc >= 0):

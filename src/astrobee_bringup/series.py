@@ -33,12 +33,12 @@ class Series:
     att_error: list[float] = field(default_factory=list)
     clear_t: list[float] = field(default_factory=list)
     robot_clearance: list[float] = field(default_factory=list)
-    bag_clearance: list[float] = field(default_factory=list)
+    cargo_clearance: list[float] = field(default_factory=list)
     in_contact: list[bool] = field(default_factory=list)
     contact_bodies: set[str] = field(default_factory=set)
     contact_names: list[tuple[str, ...]] = field(default_factory=list)   # bodies touching, per sample
-    bag_t: list[float] = field(default_factory=list)
-    bag_position: list[list[float]] = field(default_factory=list)
+    cargo_t: list[float] = field(default_factory=list)
+    cargo_position: list[list[float]] = field(default_factory=list)
     controlling: list[tuple[float, float]] = field(default_factory=list)  # CONTROLLING spans
 
     # ---- feeding from messages (live subscriptions or a recording) -------------------------
@@ -64,17 +64,17 @@ class Series:
     def add_contacts(self, msg: Any) -> None:
         self.clear_t.append(_t(msg.header.stamp))
         self.robot_clearance.append(float(msg.robot_clearance))
-        self.bag_clearance.append(float(msg.bag_clearance))
+        self.cargo_clearance.append(float(msg.bag_clearance))
         self.in_contact.append(bool(msg.in_contact))
         names = tuple(sorted({str(c.body_a) for c in msg.contacts}))
         self.contact_names.append(names)
         for c in msg.contacts:
             self.contact_bodies.add(f"{c.body_a}-{c.body_b}")
 
-    def add_bag(self, msg: Any) -> None:
+    def add_cargo(self, msg: Any) -> None:
         p = msg.pose.position
-        self.bag_t.append(_t(msg.header.stamp))
-        self.bag_position.append([p.x, p.y, p.z])
+        self.cargo_t.append(_t(msg.header.stamp))
+        self.cargo_position.append([p.x, p.y, p.z])
 
     # ---- figures ----------------------------------------------------------------------
     def window(self, t0: float, t1: float) -> "Series":
@@ -88,10 +88,10 @@ class Series:
         out.pose_t, out.position, out.orientation = cut(self.pose_t, self.position, self.orientation)
         out.ref_t, out.ref_position = cut(self.ref_t, self.ref_position)
         out.err_t, out.pos_error, out.att_error = cut(self.err_t, self.pos_error, self.att_error)
-        out.clear_t, out.robot_clearance, out.bag_clearance, out.in_contact, out.contact_names = cut(
-            self.clear_t, self.robot_clearance, self.bag_clearance, self.in_contact,
+        out.clear_t, out.robot_clearance, out.cargo_clearance, out.in_contact, out.contact_names = cut(
+            self.clear_t, self.robot_clearance, self.cargo_clearance, self.in_contact,
             self.contact_names)
-        out.bag_t, out.bag_position = cut(self.bag_t, self.bag_position)
+        out.cargo_t, out.cargo_position = cut(self.cargo_t, self.cargo_position)
         return out
 
     def tracking(self) -> dict[str, float]:
@@ -131,7 +131,7 @@ class Series:
             v = [x for x in v if x >= 0 and math.isfinite(x)]
             return float(min(v)) if v else None
         return {"min_robot_clearance": low(self.robot_clearance),
-                "min_bag_clearance": low(self.bag_clearance),
+                "min_bag_clearance": low(self.cargo_clearance),
                 "contact_samples": int(sum(self.in_contact))}
 
 
@@ -155,7 +155,7 @@ def read_bag(bag_dir: str | os.PathLike, namespace: str = "",
 
     ns = "/" + namespace.strip("/") + "/" if namespace.strip("/") else "/"
     handlers = {ns + POSE: "add_pose", ns + COMMAND: "add_command", ns + TRAJ: "add_traj",
-                "/" + CONTACTS: "add_contacts", "/" + BAG_STATE: "add_bag"}   # these two are global
+                "/" + CONTACTS: "add_contacts", "/" + BAG_STATE: "add_cargo"}   # these two are global
     series = Series()
     for m in read(bag_dir, handlers, log_window):
         try:

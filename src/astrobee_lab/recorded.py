@@ -45,7 +45,7 @@ def read_leg(bag_dir: str | os.PathLike, namespace: str = "") -> RecordedLeg:
             pre + mc.TRAJ: lambda m: b.add_traj(robot, m),
             pre + mc.COMMAND: lambda m: b.add_command(robot, m),
             pre + mc.FAULT: lambda m: b.add_fault(robot, m),
-            mc.CONTACTS: b.add_contacts, mc.BAG_STATE: b.add_bag}
+            mc.CONTACTS: b.add_contacts, mc.BAG_STATE: b.add_cargo}
     controlling: list[int] = []
     segments: list[Any] = []
     topics = [*feed, pre + mc.MOB_STATE, pre + mc.SEGMENT]

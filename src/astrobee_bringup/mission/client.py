@@ -47,14 +47,14 @@ class MissionClient(SimResets):
         self._starts: dict[str, list[float]] = {}
         self.flying: list[str] = [self.ns]          # the robots of the current leg
         self.leg: LegSamples | None = None          # the current leg's samples
-        self.bag_state: Any = None
+        self.cargo_state: Any = None
         self.scenario_info: Any = None      # the sim's latched /sim/scenario (ScenarioInfo)
         node.create_subscription("astrobee_msgs/msg/ScenarioInfo", mc.SIM_SCENARIO,
                                  self._on_scenario, self.latched)
         node.create_subscription("astrobee_msgs/msg/Contacts", mc.CONTACTS, self._on_contacts, 10)
         self.realism: dict = {}
         node.create_subscription("std_msgs/msg/String", "/sim/realism", self._on_realism, self.latched)
-        node.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_bag, 10)
+        node.create_subscription("astrobee_msgs/msg/BagState", mc.BAG_STATE, self._on_cargo, 10)
         self.watch(self.ns)
         self.planner = node.create_client("astrobee_msgs/srv/PlanGlobal", mc.PLANNER_GLOBAL)
         self.formation = node.create_client("astrobee_msgs/srv/PlanFormation", mc.PLANNER_FORMATION)
@@ -100,12 +100,12 @@ class MissionClient(SimResets):
         if self.leg is not None:
             self.leg.add_contacts(msg)
 
-    def _on_bag(self, msg: Any) -> None:
-        self.bag_state = msg
+    def _on_cargo(self, msg: Any) -> None:
+        self.cargo_state = msg
         for n in self.flying:
-            self.watches[n].series.add_bag(msg)
+            self.watches[n].series.add_cargo(msg)
         if self.leg is not None:
-            self.leg.add_bag(msg)
+            self.leg.add_cargo(msg)
 
     # ---- waiting ------------------------------------------------------------------------
     def spin_until(self, cond, wall_timeout: float, what, tick=None) -> None:

@@ -65,9 +65,9 @@ def plan_formation(client: Any, ws: list[RobotWatch], info: Any, fm: Any, goal_p
         poses.append(m)
     req.starts = poses
     set_pose(req.goal, goal_p, goal_q)
-    if info.carrying_bag and client.bag_state is not None:
+    if info.carrying_bag and client.cargo_state is not None:
         req.has_bag_pose = True
-        req.bag_pose = client.bag_state.pose
+        req.bag_pose = client.cargo_state.pose
         req.bag_size = info.bag_size
     req.flight_mode = fm.name
     t_start = client.sim_time + (HANDOVER_LEAD if client.handover else FORMATION_LEAD)
