@@ -38,3 +38,26 @@ def test_bad_filters_are_one_line(only, needle, capsys):
     assert study_cli.main(argv) == 1
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
+
+
+def test_a_subset_report_says_so_and_reads_the_oracle(tmp_path):
+    import json
+
+    import yaml
+    whole = load_study(STUDY)
+    (tmp_path / "flights").mkdir()
+    (tmp_path / "study.yaml").write_text(yaml.safe_dump(whole.source, sort_keys=False))
+    picked = [f for f in whole.flights if f.block == "bump" and f.spec["seed"] == 0
+              and f.label in ("pd", "wmpc") and f.swept["realism.disturbances.0.magnitude"] == 5.0]
+    for f, ok in zip(picked, (False, True)):
+        (tmp_path / "flights" / f"{f.key}.json").write_text(json.dumps(
+            {"key": f.key, "spec": f.spec, "status": "ok",
+             "row": {"seed": 0, "success": ok, "cause": "x", "min_bag_clearance": 0.2,
+                     "contacts": 0}}))
+    argv = ["report", str(tmp_path), "--only", "controller=pd,wmpc", "--only", "block=bump"]
+    assert study_cli.main(argv) == 0
+    md = (tmp_path / "report.md").read_text()
+    assert "(subset: controller in pd, wmpc; block in bump; 160 of 840 rows)" in md
+    assert "2 of 160 rows flown" in md
+    # the repository's oracle answers for seed 0 at 5 N (solved: feasible)
+    assert "\n| 1 of 1 | 0 of 1 | 1 of 1 |" in md

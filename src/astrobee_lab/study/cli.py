@@ -3,7 +3,7 @@ graph.
 
     astrobee study run studies/smoke.yaml [--workers N | --ray auto|local|ADDRESS] [--out DIR]
                                           [--only controller=pd,wmpc --only seed=0,1 ...]
-    astrobee study report runs/study_smoke            # report.md, report.html, plots/
+    astrobee study report runs/study_smoke            # report.md, report.html, plots/ [--only ...]
     astrobee study reflow runs/study_smoke ROW        # ROW: index in results.csv or a key prefix
 """
 from __future__ import annotations
@@ -41,7 +41,8 @@ def _report(a: argparse.Namespace) -> int:
     folder = Path(a.dir)
     if not (folder / "study.yaml").is_file():
         raise StudyError(f"{folder} is not a study folder (no study.yaml)")
-    study = load_study(folder / "study.yaml")
+    from .subset import parse_only, select
+    study = select(load_study(folder / "study.yaml"), parse_only(a.only or []))
     store = StudyStore(folder)
     table = store.write_table(study)
     md = write_report(study, store.table(study), folder)
@@ -79,6 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     rp = sub.add_parser("report", help="rewrite results.csv, report.md, report.html (one "
                         "self-contained page) and plots of a folder")
     rp.add_argument("dir")
+    rp.add_argument("--only", action="append", metavar="KEY=V1,V2",
+                    help="report only these flights (as `run --only`: a subset, said so)")
     rp.set_defaults(func=_report)
     rf = sub.add_parser("reflow", help="re-fly one row through the whole graph and compare")
     rf.add_argument("dir", help="study folder")
