@@ -77,6 +77,8 @@ def format_arguments(name: str) -> str:
     if not declared:
         return f"launch description '{name}' declares no arguments\n"
     lines = ["Arguments (pass arguments as '<name>:=<value>'):", ""]
+    key, default, what = RUNTIME_ARGUMENT          # the launcher's own, for every description
+    declared = {**declared, key: (default, what)}
     for key, (default, what) in declared.items():
         lines += [f"    '{key}':", f"        {what}",
                   f"        (default: '{default}')" if default else "        (no default)", ""]
@@ -174,11 +176,49 @@ def record_cause(run_dir: Path, cause: str) -> None:
     write_json(path, data)
 
 
+RUNTIME_ARGUMENT = ("runtime", "roszen", "roszen (rmw_zenoh's wire, the default) | rclpy (real "
+                    "rclpy, any RMW: make install-rclpy or a sourced ROS 2 Jazzy)")
+
+
+def select_runtime(arguments: dict[str, str]) -> str:
+    """The launcher's own `runtime:=` argument (taken out of `arguments`): roszen or rclpy. For
+    rclpy every node is started with ASTROBEE_RUNTIME=rclpy (roszen.runtime)."""
+    runtime = arguments.pop(RUNTIME_ARGUMENT[0], "") or os.environ.get("ASTROBEE_RUNTIME") or "roszen"
+    if runtime not in ("roszen", "rclpy"):
+        raise LaunchError(f"runtime:={runtime}: expected roszen | rclpy")
+    if runtime == "rclpy" and importlib.util.find_spec("rclpy") is None:
+        raise LaunchError("runtime:=rclpy: rclpy is not importable here (make install-rclpy, "
+                          "then .venv-rclpy/bin/astrobee; or source a ROS 2 Jazzy install)")
+    return runtime
+
+
+def rclpy_specs(specs: list[NodeSpec]) -> list[NodeSpec]:
+    """The launch on real rclpy: no zenoh router; the recorder is roszen's on rclpy
+    (roszen.rclpy_backend.record, the same bag options)."""
+    from dataclasses import replace
+    out = []
+    for spec in specs:
+        if spec.kind == "router":
+            continue
+        if spec.kind == "recorder" and spec.command and spec.command[:2] == ["bag", "record"]:
+            spec = replace(spec, argv=[sys.executable, "-m", "roszen.rclpy_backend.record",
+                                       *spec.command[2:]])
+        out.append(spec)
+    return out
+
+
 def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: Path | None = None,
            use_ros2: bool | None = None, registry: dict | None = None,
            sigint_timeout: float = 5.0, sigterm_timeout: float = 3.0,
            stop_grace: float = 0.75) -> int:
     """Build launch description `name` with `arguments` and run it; the exit status."""
+    arguments = dict(arguments)
+    runtime = select_runtime(arguments)
+    if runtime == "rclpy":
+        os.environ["ASTROBEE_RUNTIME"] = "rclpy"      # inherited by every node started
+        use_ros2 = False                              # `astrobee run`: this interpreter's rclpy
+    else:
+        os.environ.pop("ASTROBEE_RUNTIME", None)      # the argument over the environment
     use_ros2 = ros2_available() if use_ros2 is None else use_ros2
     if run_dir is None:
         run_dir = Path("runs") / time.strftime("%Y%m%d-%H%M%S")
@@ -193,6 +233,8 @@ def launch(name: str, arguments: dict[str, str], *, port: int = 7447, run_dir: P
     created = _missing_dirs(run_dir)
     try:
         specs = generate(ctx)
+        if runtime == "rclpy":
+            specs = rclpy_specs(specs)
         launcher = Launcher(specs, use_ros2=use_ros2, port=port, run_dir=run_dir,
                             registry=registry, sigint_timeout=sigint_timeout,
                             sigterm_timeout=sigterm_timeout, stop_grace=stop_grace)
