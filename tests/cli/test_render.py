@@ -22,12 +22,14 @@ HALF = np.array([0.25, 0.21, 0.125])
 T0_NS = 1_700_000_000_000_000_000
 
 
-def _stamp(h, t: float) -> None:
+def stamp_header(h, t: float) -> None:
+    """A world-frame header stamped t s (also the cargo-visible tests')."""
     h.stamp.sec, h.stamp.nanosec = int(t), int(round((t - int(t)) * 1e9))
     h.frame_id = "world"
 
 
-def _pose(pose, pos, q) -> None:
+def set_pose(pose, pos, q) -> None:
+    """A geometry_msgs/Pose from a position and an [x, y, z, w] quaternion."""
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in pos)
     o = pose.orientation
     o.x, o.y, o.z, o.w = (float(v) for v in q)
@@ -37,12 +39,12 @@ def _path_msg(points, t):
     P, PS = typestore.message_class("nav_msgs/msg/Path"), \
         typestore.message_class("geometry_msgs/msg/PoseStamped")
     m = P()
-    _stamp(m.header, t)
+    stamp_header(m.header, t)
     poses = []
     for p in points:
         ps = PS()
-        _stamp(ps.header, t)
-        _pose(ps.pose, p, Q)
+        stamp_header(ps.header, t)
+        set_pose(ps.pose, p, Q)
         poses.append(ps)
     m.poses = poses
     return m
@@ -73,19 +75,19 @@ def write_recording(bag_dir, seconds: float = 4.0, rate: float = 20.0, fem_nodes
         log = T0_NS + int(t * 1e9) + 1000
         pos = START + [0.0, -0.2 * t, 0.0]
         ps = PS()
-        _stamp(ps.header, t)
-        _pose(ps.pose, pos, Q)
+        stamp_header(ps.header, t)
+        set_pose(ps.pose, pos, Q)
         w.write("/loc/truth/pose", ser["/loc/truth/pose"](ps), log)
         centre = pos + [0.0, -0.55, 0.0]
         bs = BS()
-        _stamp(bs.header, t)
+        stamp_header(bs.header, t)
         bs.model, bs.variant = ("fem" if fem_nodes is not None else "rigid"), "front"
-        _pose(bs.pose, centre, [0, 0, 0, 1])
+        set_pose(bs.pose, centre, [0, 0, 0, 1])
         w.write("/sim/bag/state", ser["/sim/bag/state"](bs), log + 1)
         if k % 2 == 0:
             pts = centre + (fem_nodes if fem_nodes is not None else CORNERS * HALF)
             bm = BM()
-            _stamp(bm.header, t)
+            stamp_header(bm.header, t)
             bm.num_nodes = len(pts)
             bm.positions = np.asarray(pts, np.float32).reshape(-1)
             w.write("/sim/bag/mesh", ser["/sim/bag/mesh"](bm), log + 2)

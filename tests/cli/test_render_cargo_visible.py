@@ -10,6 +10,8 @@ import json
 import numpy as np
 import pytest
 
+from test_render import set_pose, stamp_header
+
 from roszen import typestore
 from roszen.bag.writer import BagWriter
 from roszen.qos import LATCHED, QoSProfile
@@ -21,17 +23,6 @@ T0_NS = 1_700_000_000_000_000_000
 TYPES = {"pose": "geometry_msgs/msg/PoseStamped", "/sim/bag/state": "astrobee_msgs/msg/BagState",
          "/sim/bag/mesh": "astrobee_msgs/msg/BagMesh", "/sim/contacts": "astrobee_msgs/msg/Contacts",
          "/sim/scenario": "astrobee_msgs/msg/ScenarioInfo"}
-
-
-def _stamp(h, t: float) -> None:
-    h.stamp.sec, h.stamp.nanosec = int(t), int(round((t - int(t)) * 1e9))
-    h.frame_id = "world"
-
-
-def _pose(pose, pos, q) -> None:
-    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in pos)
-    o = pose.orientation
-    o.x, o.y, o.z, o.w = (float(v) for v in q)
 
 
 def write_leg(bag_dir, robots=("",), bag: str | None = "rigid", mesh: bool = True,
@@ -50,7 +41,7 @@ def write_leg(bag_dir, robots=("",), bag: str | None = "rigid", mesh: bool = Tru
     ser = {ty: typestore.serializer(ty) for ty in TYPES.values()}
     M = {k: typestore.message_class(ty) for k, ty in TYPES.items()}
     sc = M["/sim/scenario"]()
-    _stamp(sc.header, 0.0)
+    stamp_header(sc.header, 0.0)
     sc.name, sc.robots = "leg", list(robots)
     sc.carrying_bag = bag is not None
     sc.bag_model, sc.bag_variant, sc.bag_nodes = bag or "", "front", 0
@@ -66,12 +57,12 @@ def write_leg(bag_dir, robots=("",), bag: str | None = "rigid", mesh: bool = Tru
         log = t0_ns + int(t * 1e9) + 1000
         for i, r in enumerate(robots):
             ps = M["pose"]()
-            _stamp(ps.header, t)
-            _pose(ps.pose, START + [0.8 * i, -0.2 * t, 0.0], Q)
+            stamp_header(ps.header, t)
+            set_pose(ps.pose, START + [0.8 * i, -0.2 * t, 0.0], Q)
             w.write(f"/{r}/loc/truth/pose" if r else "/loc/truth/pose", ser[TYPES["pose"]](ps), log)
         centre = START + [0.0, -0.2 * t - 0.5, 0.0]
         cs = M["/sim/contacts"]()
-        _stamp(cs.header, t)
+        stamp_header(cs.header, t)
         cs.robot_clearance, cs.bag_clearance = 0.6, (0.4 if bag else -1.0)
         if contact_at is not None and abs(t - contact_at) < 1e-9:
             c = typestore.message_class("astrobee_msgs/msg/Contact")()
@@ -82,13 +73,13 @@ def write_leg(bag_dir, robots=("",), bag: str | None = "rigid", mesh: bool = Tru
         if bag is None:
             continue
         bs = M["/sim/bag/state"]()
-        _stamp(bs.header, t)
+        stamp_header(bs.header, t)
         bs.model, bs.variant = bag, "front"
-        _pose(bs.pose, centre, [0, 0, 0, 1])
+        set_pose(bs.pose, centre, [0, 0, 0, 1])
         w.write("/sim/bag/state", ser[TYPES["/sim/bag/state"]](bs), log + 2)
         if mesh:
             bm = M["/sim/bag/mesh"]()
-            _stamp(bm.header, t)
+            stamp_header(bm.header, t)
             pts = centre + corners * SIZE / 2
             bm.num_nodes = len(pts)
             bm.positions = np.asarray(pts, np.float32).reshape(-1)

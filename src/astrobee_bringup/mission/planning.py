@@ -23,7 +23,7 @@ HANDOVER_LEAD = 1.0
 
 
 def plan_one(client: Any, w: RobotWatch, info: Any, fm: Any, goal_p: np.ndarray,
-         goal_q: np.ndarray, res: LegResult) -> tuple[list[Any], float]:
+             goal_q: np.ndarray, res: LegResult) -> tuple[list[Any], float]:
     """PlanGlobal for one robot: ([segment], duration)."""
     pos, q = w.pose
     req = client.roszen.request_class("astrobee_msgs/srv/PlanGlobal")()
@@ -34,12 +34,9 @@ def plan_one(client: Any, w: RobotWatch, info: Any, fm: Any, goal_p: np.ndarray,
     # the cargo bag trails along the path: the scenario's margin (bags.yaml's carry_extent default)
     req.carry_extent = float(info.carry_extent) if info.carrying_bag else 0.0
     res.carry_extent = req.carry_extent
-    plan = client.call(client.planner, req, 120.0, mc.PLANNER_GLOBAL)
-    res.planning_time = float(plan.planning_time)
-    if not plan.success:
-        raise MissionError(f"planning failed (code {plan.code}): {plan.message}")
+    plan = _call_planner(client, client.planner, req, mc.PLANNER_GLOBAL, "planning", res)
     client.log.info(f"{info.name}: plan of {plan.duration:.1f} s in {plan.planning_time:.2f} s, "
-                  f"{len(plan.segment)} states")
+                    f"{len(plan.segment)} states")
     seg = client.roszen.message_class("astrobee_msgs/msg/Segment")()
     seg.header.stamp = client.node.get_clock().now().to_msg()
     seg.header.frame_id = "world"
@@ -52,8 +49,9 @@ def plan_one(client: Any, w: RobotWatch, info: Any, fm: Any, goal_p: np.ndarray,
         mc.set_stamp(seg.header.stamp, t0)
     return [seg], float(plan.duration)
 
+
 def plan_formation(client: Any, ws: list[RobotWatch], info: Any, fm: Any, goal_p: np.ndarray,
-               goal_q: np.ndarray, res: LegResult) -> tuple[list[Any], float]:
+                   goal_q: np.ndarray, res: LegResult) -> tuple[list[Any], float]:
     """PlanFormation for two robots holding the cargo bag: (one segment per robot, all with
     the same start stamp a moment ahead, duration)."""
     req = client.roszen.request_class("astrobee_msgs/srv/PlanFormation")()
@@ -72,16 +70,25 @@ def plan_formation(client: Any, ws: list[RobotWatch], info: Any, fm: Any, goal_p
     req.flight_mode = fm.name
     t_start = client.sim_time + (HANDOVER_LEAD if client.handover else FORMATION_LEAD)
     mc.set_stamp(req.start_time, t_start)
-    plan = client.call(client.formation, req, 120.0, mc.PLANNER_FORMATION)
-    res.planning_time = float(plan.planning_time)
-    if not plan.success:
-        raise MissionError(f"formation planning failed (code {plan.code}): {plan.message}")
+    plan = _call_planner(client, client.formation, req, mc.PLANNER_FORMATION,
+                         "formation planning", res)
     client.log.info(f"{info.name}: formation plan of {plan.duration:.1f} s in "
-                  f"{plan.planning_time:.2f} s: {'; '.join(plan.steps)}")
+                    f"{plan.planning_time:.2f} s: {'; '.join(plan.steps)}")
     for w, seg in zip(ws, plan.segments):
         end = seg.segment[-1].pose
         client._goals[w.name] = mc.pose(end)
     return list(plan.segments), float(plan.duration)
+
+
+def _call_planner(client: Any, service: Any, req: Any, name: str, what: str,
+                  res: LegResult) -> Any:
+    """A planner service's answer (120 s at most), its planning time noted in `res`; a failed
+    plan ends the leg with a MissionError naming `what`, the code and the planner's message."""
+    plan = client.call(service, req, 120.0, name)
+    res.planning_time = float(plan.planning_time)
+    if not plan.success:
+        raise MissionError(f"{what} failed (code {plan.code}): {plan.message}")
+    return plan
 
 
 def set_pose(dst: Any, p: np.ndarray, q: np.ndarray) -> None:
