@@ -1,12 +1,8 @@
-"""Which peers a mission depends on have left the graph: roszen.peers' PeerWatch (re-exported
-here for the mission) and relay_missing (is a safety filter relaying the commands?)."""
+"""Whether a mission's command path is complete: relay_missing (is a safety filter relaying the
+commands?). Peers that left the graph are roszen.peers' PeerWatch."""
 from __future__ import annotations
 
 from typing import Any
-
-from roszen.peers import PeerLost, PeerWatch
-
-__all__ = ["PeerLost", "PeerWatch", "relay_missing"]
 
 
 def relay_missing(node: Any, upstream: str, downstream: str) -> str:

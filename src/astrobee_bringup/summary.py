@@ -3,8 +3,8 @@ leg's samples: astrobee_bringup.mission.result), summary.json, and `finalize` (t
 re-drawn from the closed recording).
 
 The pieces it used to hold live in modules of one job: the flight's time series and reading it
-back from the recording in astrobee_bringup.series, the leg's plot in astrobee_bringup.leg_plot
-(both re-exported here for the mission). Wording: "cargo bag" is the carried bag; "recording"
+back from the recording in astrobee_bringup.series, the leg's plot in astrobee_bringup.leg_plot.
+Wording: "cargo bag" is the carried bag; "recording"
 is the rosbag2 directory of the run.
 """
 from __future__ import annotations
@@ -18,11 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from astrobee.msgconv import COMMAND, MOB_STATE, POSE, TRAJ  # noqa: F401 - the mission's names
-from astrobee.task import robot_named  # noqa: F401
-from astrobee_bringup.leg_plot import _module_labels, _unit, plot  # noqa: F401
-from astrobee_bringup.series import (BAG_STATE, CONTACTS, Series, _t, contact_name,  # noqa: F401
-                                     read_bag, robot_label)
+from astrobee.task import robot_named
+from astrobee_bringup.leg_plot import plot
+from astrobee_bringup.series import read_bag
 
 
 @dataclass

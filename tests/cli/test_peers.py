@@ -1,4 +1,4 @@
-"""astrobee_bringup.peers.PeerWatch: a node killed with SIGKILL is reported lost (by name and
+"""roszen.peers.PeerWatch: a node killed with SIGKILL is reported lost (by name and
 as its topic's publisher) without any timeout; a peer not yet started is missing, not lost."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import time
 import pytest
 
 import roszen
-from astrobee_bringup.peers import PeerLost, PeerWatch
+from roszen.peers import PeerLost, PeerWatch
 from roszen.testing import kill9, python_cmd, read_until, spawn, stop
 
 pytestmark = pytest.mark.graph

@@ -10,7 +10,9 @@ import numpy as np
 
 from astrobee import config
 from astrobee.task import Goal, Task, TaskSample, judge
+from astrobee_bringup import leg_plot
 from astrobee_bringup import summary as sm
+from astrobee_bringup.series import Series
 
 TOL_P, TOL_A = 0.2, 0.35
 Q = np.array([0.0, 0.0, 0.0, 1.0])
@@ -74,7 +76,7 @@ def test_finish_leg_fills_each_robot_from_the_tasks_judgement():
     """The mission's finish_leg: a robot with no pose is 'unknown (no pose)', its result says
     it did not reach its goal; the leg's reason is the abort."""
     from astrobee_bringup.mission.result import LegResult, finish_leg
-    w = SimpleNamespace(name="", named="the default robot", series=sm.Series(), pose=None,
+    w = SimpleNamespace(name="", named="the default robot", series=Series(), pose=None,
                         faults=[], sim_time=float("nan"), position_at=lambda t: None)
     client = SimpleNamespace(watches={"": w}, flying=[""], series=w.series, realism={},
                              _starts={}, _goals={"": (GOALS[""], Q)}, leg=None, task=None,
@@ -105,7 +107,7 @@ def test_plot_of_a_failed_two_robot_leg(tmp_path):
     """Every robot's path and the failure mark render; millimetres for small errors."""
     per = {}
     for name, y0 in (("", -0.45), ("bumble", 0.5)):
-        s = sm.Series()
+        s = Series()
         for k in range(200):
             t = 0.016 * k
             s.pose_t.append(t)
@@ -120,11 +122,11 @@ def test_plot_of_a_failed_two_robot_leg(tmp_path):
     robots = [asdict(_robot("", start=[10.95, -0.45, 4.84], goal=[10.93, -6.0, 4.85])),
               asdict(_robot("bumble", start=[10.95, 0.5, 4.84], goal=[10.93, -5.05, 4.85],
                             failed_at={"t": 1.0, "position": [10.95, 0.4, 4.84], "why": "fault: x"}))]
-    out = sm.plot(per, tmp_path / "plot.png", config.keep_in_boxes(), title="t: FAILED",
+    out = leg_plot.plot(per, tmp_path / "plot.png", config.keep_in_boxes(), title="t: FAILED",
                   robots=robots, t0=0.0, success=False)
     assert out.stat().st_size > 20_000
-    assert sm._unit(0.0025) == (1000.0, "mm") and sm._unit(0.5) == (1.0, "m")
-    labels = [n for n, _, _ in sm._module_labels((1, 0), np.array([10, -7, 4]), np.array([12, 1, 6]))]
+    assert leg_plot._unit(0.0025) == (1000.0, "mm") and leg_plot._unit(0.5) == (1.0, "m")
+    labels = [n for n, _, _ in leg_plot._module_labels((1, 0), np.array([10, -7, 4]), np.array([12, 1, 6]))]
     assert "JEM" in labels and "node 2" in labels and "node 1" not in labels
 
 

@@ -26,7 +26,7 @@ the leg ends at the first chunk end after the Task ended it. Nothing depends on 
 clock: the same seed gives the same recording (tests/e2e/test_determinism_launch.py).
 
 Lost peers: the simulator, the planner or a flying robot's controller leaving the graph (even
-kill -9) fails the leg at once with "lost node <name>" (astrobee_bringup.peers).
+kill -9) fails the leg at once with "lost node <name>" (roszen.peers.PeerWatch).
 
 Modules: cli (arguments, the run), client (the node, waiting, peers), resets (the sim brought
 to a scenario), watch (one robot followed), planning (the plan's segments), leg (one leg,

@@ -11,7 +11,7 @@ from pathlib import Path
 from astrobee import config
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee.task import SETTLE_BUDGET
-from astrobee_bringup import summary as sm
+from astrobee_bringup.series import Series
 
 from .client import MissionClient
 from .leg import fly_leg
@@ -53,7 +53,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
                            await_recorder=await_recorder)
     progress = Progress(stream)
     legs: list[LegResult] = []
-    all_series: list[dict[str, sm.Series]] = []
+    all_series: list[dict[str, Series]] = []
     status = "completed"
     code = 0
     try:
@@ -69,7 +69,7 @@ def run_mission(scenarios: list[str], run_dir: Path, namespace: str = "",
             legs.append(res)
             all_series.append(client.leg_series())
             for w in client.watches.values():   # samples after this leg's end belong to no leg
-                w.series = sm.Series()
+                w.series = Series()
             progress.done(f"[mission] {name}: {'SUCCESS' if res.success else 'FAILED'}: {res.reason}"
                           + (f" ({res.duration:.1f} s sim, {res.real_time_factor:.1f}x real time)"
                              if res.duration is not None and res.real_time_factor else ""))

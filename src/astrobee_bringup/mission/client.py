@@ -9,8 +9,8 @@ import numpy as np
 
 from astrobee import msgconv as mc
 from astrobee.leg_samples import LegSamples
-from astrobee_bringup import summary as sm
-from astrobee_bringup.peers import PeerLost, PeerWatch
+from astrobee_bringup.series import Series
+from roszen.peers import PeerLost, PeerWatch
 
 from .resets import SimResets
 from .result import Interrupted, MissionError
@@ -67,11 +67,11 @@ class MissionClient(SimResets):
         return self.watches[name]
 
     @property
-    def series(self) -> sm.Series:
+    def series(self) -> Series:
         """The first robot's series of the current leg (with the contacts and cargo bag)."""
         return self.watches[self.flying[0]].series
 
-    def leg_series(self) -> dict[str, sm.Series]:
+    def leg_series(self) -> dict[str, Series]:
         return {n: self.watches[n].series for n in self.flying}
 
     @property

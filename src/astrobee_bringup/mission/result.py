@@ -17,6 +17,8 @@ from astrobee import config
 from astrobee import rotations as rot
 from astrobee.task import Goal, Task, TaskMonitor, judge
 from astrobee_bringup import summary as sm
+from astrobee_bringup.leg_plot import plot
+from astrobee_bringup.series import Series, contact_name
 
 
 class Interrupted(Exception):
@@ -116,7 +118,7 @@ def finish_leg(client: Any, res: LegResult, end_ns: int | None = None) -> TaskMo
         for k, v in w.series.tracking().items():
             setattr(r, k, v if v == v else None)
         r.min_clearance = w.series.robot_min_clearance()
-        r.contacts = s.contact_samples(sm.contact_name(w.name))
+        r.contacts = s.contact_samples(contact_name(w.name))
         r.faults = [text for _, text in w.faults]
         probs = monitor.robot_problems(w.name) if w.name in task.goals else ["no goal"]
         r.reached_goal = not any(p.startswith("final") for p in probs)
@@ -148,7 +150,7 @@ def finish_leg(client: Any, res: LegResult, end_ns: int | None = None) -> TaskMo
     return monitor
 
 
-def _failure_marks(ws: list[Any], robots: list[sm.RobotResult], s: sm.Series, aborted: str) -> None:
+def _failure_marks(ws: list[Any], robots: list[sm.RobotResult], s: Series, aborted: str) -> None:
     """Where and why each failing robot failed (the plot's marks)."""
     for w, r in zip(ws, robots):
         if r.success:
@@ -156,7 +158,7 @@ def _failure_marks(ws: list[Any], robots: list[sm.RobotResult], s: sm.Series, ab
         if w.faults:
             t, why = w.faults[0][0], f"fault: {w.faults[0][1]}"
         elif r.contacts:
-            t, why = s.first_contact(sm.contact_name(w.name)), "touched the station"
+            t, why = s.first_contact(contact_name(w.name)), "touched the station"
         elif aborted:       # not the cause: it stopped with the leg
             r.reason = f"stopped with the aborted leg ({r.reason})"
             continue
@@ -205,7 +207,7 @@ def write_summary(path: Path, data: dict[str, Any]) -> str:
         return f"could not write {path}: {exc}"
 
 
-def write_outputs(run_dir: Path, legs: list[LegResult], series: list[dict[str, sm.Series]],
+def write_outputs(run_dir: Path, legs: list[LegResult], series: list[dict[str, Series]],
                   status: str) -> dict[str, Any]:
     """summary.json and one plot per leg (every robot of the leg) in run_dir; data["write_error"]
     says in one line why summary.json could not be written."""
@@ -215,7 +217,7 @@ def write_outputs(run_dir: Path, legs: list[LegResult], series: list[dict[str, s
         if any(s.position for s in per.values()):
             name = "plot.png" if len(legs) == 1 else f"plot_{leg.scenario}.png"
             try:
-                sm.plot(per, run_dir / name, boxes,
+                plot(per, run_dir / name, boxes,
                         title=f"{leg.scenario}: {'SUCCESS' if leg.success else 'FAILED'}: {leg.reason}",
                         start=leg.start[:3] or None, goal=leg.goal[:3] or None,
                         robots=leg.robots or None, t0=leg.sim_t0, success=leg.success)

@@ -9,7 +9,8 @@ import numpy as np
 
 from astrobee import msgconv as mc
 from astrobee.leg_samples import LegSamples
-from astrobee_bringup import summary as sm
+from astrobee.task import robot_named
+from astrobee_bringup.series import Series, robot_label
 
 IDLE, STOPPED, CONTROLLING = (mc.MotionState.IDLE, mc.MotionState.STOPPED,
                               mc.MotionState.CONTROLLING)
@@ -25,9 +26,9 @@ class RobotWatch:
     def __init__(self, node: Any, name: str, latched: Any, deep_latched: Any) -> None:
         pre = mc.ns(name) + "/"
         self.name = name
-        self.label = sm.robot_label(name)
-        self.named = sm.robot_named(name)
-        self.series = sm.Series()
+        self.label = robot_label(name)
+        self.named = robot_named(name)
+        self.series = Series()
         self.leg: LegSamples | None = None       # the current leg's samples (set by the leg)
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
         self.sim_time = float("nan")
@@ -98,7 +99,7 @@ class RobotWatch:
     def start_leg(self, leg: LegSamples | None = None) -> int:
         """Forget the previous leg's figures and faults (an active fault stays) and send this
         leg's messages to `leg`; returns the index of the next /mob/state change."""
-        self.series = sm.Series()
+        self.series = Series()
         self.leg = leg
         self.faults = [self.fault_active] if self.fault_active else []
         return len(self.mob_changes)
