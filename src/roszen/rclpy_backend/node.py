@@ -25,6 +25,17 @@ def ensure_init(argv: Optional[Sequence[str]] = None, **kw: Any) -> None:
         rclpy.init(args=list(argv) if argv else None, **kw)
 
 
+def make_executor() -> Any:
+    """One executor per node: SingleThreadedExecutor, or rclpy's EventsExecutor with
+    ASTROBEE_RCLPY_EXECUTOR=events (driven by spin_once only: its spin() busy-loops in 7.1.6)."""
+    import os
+    if os.environ.get("ASTROBEE_RCLPY_EXECUTOR", "") == "events":
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
+
+
 class Clock:
     """A node's clock (rclpy's: sim time with use_sim_time) with roszen's `now()` (roszen Time,
     whose to_msg() is a roszen message) and `add_listener(cb(ns))` on each /clock sample."""
@@ -147,7 +158,6 @@ class Node(RclpyParameters):
                  argv: Optional[Sequence[str]] = None, cli_args: Optional[Sequence[str]] = None,
                  **kw: Any) -> None:
         import rclpy.node
-        from rclpy.executors import SingleThreadedExecutor
         from ..args import parse_args
         ensure_init(argv)
         self.user_args, _ = parse_args(list(argv or []))
@@ -156,7 +166,7 @@ class Node(RclpyParameters):
                                       cli_args=list(cli_args) if cli_args else None, **kw)
         self._install_parameter_callback()
         self._runs = [0]               # callbacks run (spin_once's "did something")
-        self._executor = SingleThreadedExecutor()
+        self._executor = make_executor()
         self._executor.add_node(self._rnode)
         self._clock = Clock(self._rnode.get_clock(), self)
         self._alive = True
