@@ -186,10 +186,18 @@ def select_runtime(arguments: dict[str, str]) -> str:
     runtime = arguments.pop(RUNTIME_ARGUMENT[0], "") or os.environ.get("ASTROBEE_RUNTIME") or "roszen"
     if runtime not in ("roszen", "rclpy"):
         raise LaunchError(f"runtime:={runtime}: expected roszen | rclpy")
-    if runtime == "rclpy" and importlib.util.find_spec("rclpy") is None:
+    if runtime == "rclpy" and not _rclpy_importable():
         raise LaunchError("runtime:=rclpy: rclpy is not importable here (make install-rclpy, "
                           "then .venv-rclpy/bin/astrobee; or source a ROS 2 Jazzy install)")
     return runtime
+
+
+def _rclpy_importable() -> bool:
+    """Real rclpy is importable (rclpy.node: a folder named rclpy on the path is no rclpy)."""
+    try:
+        return importlib.util.find_spec("rclpy.node") is not None
+    except ImportError:
+        return False
 
 
 def rclpy_specs(specs: list[NodeSpec]) -> list[NodeSpec]:

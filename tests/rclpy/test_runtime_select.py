@@ -63,3 +63,26 @@ def test_parameter_descriptors_on_rclpy(monkeypatch):
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def test_launch_runtime_argument(monkeypatch):
+    """runtime:= is the launcher's own: taken out of the description's arguments, checked in
+    one line; on rclpy the router goes and the recorder is roszen's on rclpy."""
+    from astrobee_bringup import launcher
+    from astrobee_bringup.process_group import LaunchError, NodeSpec
+    monkeypatch.delenv("ASTROBEE_RUNTIME", raising=False)
+    args = {"scenario": "node2_to_jem", "runtime": "roszen"}
+    assert launcher.select_runtime(args) == "roszen" and args == {"scenario": "node2_to_jem"}
+    with pytest.raises(LaunchError, match=r"^runtime:=ros1: expected roszen \| rclpy$"):
+        launcher.select_runtime({"runtime": "ros1"})
+    if not rclpy_installed():
+        with pytest.raises(LaunchError, match="rclpy is not importable here"):
+            launcher.select_runtime({"runtime": "rclpy"})
+    specs = [NodeSpec("router", kind="router", command=["router", "--port", "7447"]),
+             NodeSpec("sim_node", "astrobee_sim", "sim_node"),
+             NodeSpec("recorder", kind="recorder",
+                      command=["bag", "record", "-a", "--use-sim-time", "-o", "bag"])]
+    out = launcher.rclpy_specs(specs)
+    assert [s.name for s in out] == ["sim_node", "recorder"]
+    assert out[1].argv[1:] == ["-m", "roszen.rclpy_backend.record", "-a", "--use-sim-time",
+                               "-o", "bag"]
