@@ -70,8 +70,8 @@ def wall_clock(use_sim_time: bool = False) -> Clock:
 
 class EndpointInfo:
     """rclpy's TopicEndpointInfo with roszen's `node_fqn`, `ros_type`, `qos` (a roszen profile;
-    what DDS discovery does not tell, roszen's defaults), `type_hash` ('': not checked) and
-    `token` (a key naming the endpoint)."""
+    what DDS discovery does not tell, roszen's defaults), `type_hash` (the advertised RIHS01
+    string) and `token` (a key naming the endpoint)."""
 
     def __init__(self, info: Any, topic: str = "") -> None:
         from ..qos import Durability, QoSProfile, Reliability
@@ -84,7 +84,8 @@ class EndpointInfo:
         self.qos = QoSProfile(depth=max(int(q.depth), 1),
                               reliability=Reliability(rel) if rel in (1, 2) else Reliability.RELIABLE,
                               durability=Durability(dur) if dur in (1, 2) else Durability.VOLATILE)
-        self.type_hash = ""
+        h = str(getattr(info, "topic_type_hash", ""))
+        self.type_hash = h if h.startswith("RIHS01_") else ""
         self.token = f"{self.node_fqn} {topic}"
 
     def __getattr__(self, name: str) -> Any:

@@ -1,8 +1,8 @@
 """`bag record` on real rclpy (`python -m roszen.rclpy_backend.record -a [--use-sim-time] -o DIR`):
 roszen's Recorder and BagWriter (the same rosbag2 MCAP bags) fed by raw rclpy subscriptions
 (rosbag2 itself is not on PyPI). The graph is looked at once a second (rclpy has no graph
-listener here); publishers are trusted on their advertised type (rclpy gives no RIHS01 string
-to check), and /clock is followed from any publisher (no GID on a raw sample)."""
+listener here); a publisher's advertised RIHS01 hash is checked as on roszen; /clock is
+followed from any publisher (no GID on a raw sample)."""
 from __future__ import annotations
 
 import argparse
