@@ -1,11 +1,15 @@
 """Fly the oracle's plans in the FEM simulator (astrobee_lab.oracle.fly): does the answer hold?
 
-    python bench/oracle_fly.py [--cases 5:0 10:0 10:1] [--nodes 300]
+    python bench/oracle_fly.py [--cases 5:0 10:0 5:1] [--nodes 300] [--feedback lqr|pd]
+                               [--pair fem|physical] [--swing] [--replan S] [--trace-dir DIR]
 
 Each case MAGNITUDE:SEED is solved by the oracle (Node 2 -> JEM, nominal, the study's bump of
-that seed) and flown: PD on the plan until the oracle's window, then its wrench + feedback.
-Prints one row per case (oracle answer, flown verdict, contacts, minimum bag clearance) and
-appends them to studies/results/oracle/flown.csv.
+that seed) on the pair model `--pair` (fem: the identified parameters of
+config/reduced_models.yaml, the study's; physical: pair_model.PairParams' defaults, the grasp
+where the FEM bag is held and bags.yaml's strap figures) and flown: PD on the plan until the
+oracle's window, then its wrench + feedback (lqr: the time-varying LQR on the same model).
+Prints one row per case and appends them to studies/results/oracle/flown_tracked.csv
+(flown.csv: the first round, PD feedback on the robot, the fem pair).
 """
 from __future__ import annotations
 
@@ -14,17 +18,24 @@ import csv
 import os
 import time
 
+import numpy as np
+
 from astrobee_control import pair_model as pm
-from astrobee_lab.oracle import fly, solve as so
+from astrobee_lab.oracle import fly, solve as so, tracking
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--cases", nargs="*", default=["5:0", "10:0", "10:1"])
+    ap.add_argument("--cases", nargs="*", default=["5:0", "10:0", "5:1"])
     ap.add_argument("--nodes", type=int, default=300)
-    ap.add_argument("--out", default="studies/results/oracle/flown.csv")
+    ap.add_argument("--feedback", default="lqr", choices=["lqr", "pd"])
+    ap.add_argument("--pair", default="fem", choices=["fem", "physical"])
+    ap.add_argument("--swing", action="store_true", help="the LQR weights the bag's swing too (SWING_SCALE)")
+    ap.add_argument("--replan", type=float, default=0.0, help="s between replans from the measured state (0: none)")
+    ap.add_argument("--trace-dir", default="", help="save each flight's per-tick trace (npz) here")
+    ap.add_argument("--out", default="studies/results/oracle/flown_tracked.csv")
     a = ap.parse_args()
-    params = pm.load("fem")
+    params = pm.load("fem") if a.pair == "fem" else pm.PairParams()
     leg = so.plan_leg("node2_to_jem_bag")
     for case in a.cases:
         mag, seed = float(case.split(":")[0]), int(case.split(":")[1])
@@ -32,10 +43,18 @@ def main() -> None:
         t0 = time.perf_counter()
         r = so.solve(leg, params, b)
         t1 = time.perf_counter()
-        row = {"magnitude": mag, "seed": seed, "bump_time": b.time, "oracle_feasible": r.feasible,
-               "oracle_solve_time": round(r.solve_time, 1), **fly.fly(r, leg, params, seed, mag, a.nodes),
+        flown = fly.fly(r, leg, params, seed, mag, a.nodes, feedback=a.feedback,
+                        trace=bool(a.trace_dir), replan=a.replan,
+                        scale=tracking.SWING_SCALE if a.swing else None)
+        trace = flown.pop("trace", None)
+        row = {"magnitude": mag, "seed": seed, "bump_time": b.time, "pair": a.pair,
+               "swing_weighted": a.swing, "replan_every": a.replan,
+               "oracle_feasible": r.feasible, "oracle_solve_time": round(r.solve_time, 1), **flown,
                "fly_wall_time": round(time.perf_counter() - t1, 1)}
         row["agree"] = row["oracle_feasible"] == row["flown_success"]
+        if trace:
+            os.makedirs(a.trace_dir, exist_ok=True)
+            np.savez(os.path.join(a.trace_dir, f"trace_{mag:g}_{seed}_{a.pair}_{a.feedback}.npz"), **trace)
         print(row, f"total {time.perf_counter() - t0:.0f} s", flush=True)
         new = not os.path.exists(a.out)
         with open(a.out, "a", newline="") as f:

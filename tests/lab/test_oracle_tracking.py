@@ -43,3 +43,15 @@ def test_lqr_brings_a_perturbed_pair_back_to_the_plan():
 def test_fly_refuses_an_unknown_feedback():
     with pytest.raises(ValueError, match="feedback"):
         fly.fly(_resting(1.0), so.plan_leg(), pm.load("fem"), 0, 0.0, feedback="mpc")
+
+
+def test_a_ball_jointed_bags_swing_is_not_reachable_at_first_order():
+    """With the grasp a ball joint (twist spring only), the robot's wrench reaches 14 of the 18
+    error directions of the pair at rest: the bag's swing about the two free pivot axes
+    (angle and rate) only moves through large-angle (nonlinear) manoeuvres."""
+    A, B = tracking.linearise(X0[None], np.zeros((1, 6)), np.zeros((1, 3)), pm.PairParams(), 0.1, False)
+    blocks = [B[0]]
+    for _ in range(30):
+        blocks.append(A[0] @ blocks[-1])
+    s = np.linalg.svd(np.hstack(blocks), compute_uv=False)
+    assert int((s > s[0] * 1e-9).sum()) == 14

@@ -22,7 +22,7 @@ from astrobee import rotations as rot
 from astrobee_control import pair_model as pm
 
 from . import tracking
-from .solve import REST_OMEGA, REST_SPEED, Leg, OracleResult, bag_corners
+from .solve import REST_OMEGA, REST_SPEED, Leg, OracleResult, bag_corners, solve
 
 
 def _reference(res: OracleResult, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -48,9 +48,12 @@ def measured_state(truth: tuple, bag: Any, bag_offset: np.ndarray) -> np.ndarray
 def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude: float,
         nodes: int = 300, scenario: str = "node2_to_jem_bag", hold: float = 2.0,
         feedback: str = "lqr", pair_inertia=(0.43, 1.51, 1.66), scale: dict | None = None,
-        trace: bool = False) -> dict[str, Any]:
+        trace: bool = False, replan: float = 0.0) -> dict[str, Any]:
     """Fly the oracle's plan `res` (see the module docstring); a row of what happened (and
-    the per-tick trace under "trace" when asked)."""
+    the per-tick trace under "trace" when asked). replan > 0 (lqr only): every `replan` s of
+    simulated time the oracle is solved again from the measured pair state (the last plan as
+    the guess; the simulation waits for the solver: an idealised replanning MPC) until
+    `hold` + 5 s before the budget ends, and the LQR re-linearised along the new plan."""
     from astrobee_lab.flight import Flight
     if feedback not in ("lqr", "pd"):
         raise ValueError(f"feedback must be lqr or pd, got {feedback!r}")
@@ -73,13 +76,20 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
     akp, akd = np.asarray(mode.att_kp, float), np.asarray(mode.omega_kd, float)
     corners = bag_corners(leg.bag_size)
     world = fl.sim.world
-    contacts, clearance, tail, rows = 0, np.inf, [], []
+    contacts, clearance, tail, rows, replans = 0, np.inf, [], [], []
+    next_replan = float(res.t[0]) + replan
     while fl.sim.time < t_end - 1e-9:
         t = fl.sim.time
         if t < res.t[0]:
             _, sample = fl.step()
         else:
             x = measured_state(fl._truth[name], fl._bag, bag_offset)
+            if track is not None and replan > 0 and next_replan <= t < t_end - hold - 5.0:
+                b = res.bump if res.bump is not None and res.bump.time > t else None
+                res = solve(leg, params, b, t0=t, x0=x, guess=res)
+                replans.append((round(t, 2), res.feasible, round(res.solve_time, 1)))
+                track = tracking.plan(res, params, lim, 1.0 / 62.5, scale)
+                next_replan = t + replan
             if track is not None:
                 cmd = track.command(x, t, lim)
             else:
@@ -111,7 +121,8 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
            "flown_attitude": round(float(att), 4), "flown_speed": round(float(speed), 4),
            "flown_omega": round(float(omega), 4), "flown_contacts": contacts,
            "flown_min_bag_clearance": round(float(clearance), 4),
-           "bump_seen": log[0]["force"] if log else None}
+           "bump_seen": log[0]["force"] if log else None,
+           "replans": len(replans), "replans_feasible": sum(f for _, f, _ in replans)}
     if trace:
         out["trace"] = {k: np.array([r[k] for r in rows]) for k in rows[0]} if rows else {}
     return out

@@ -156,11 +156,12 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
           grid: float = 0.5, lead: float = 1.0, t0: float | None = None, hold: float = 2.0,
           substep: float = 0.25, max_iter: int = 600, lag: float | None = None,
           x0: np.ndarray | None = None, jit: bool = True,
-          bag_margin: float = BAG_MARGIN) -> OracleResult:
+          bag_margin: float = BAG_MARGIN, guess: "OracleResult | None" = None) -> OracleResult:
     """Solve the oracle's problem (module docstring). t0: the window's start (default: `lead`
     s before the bump, or 0 without one); lag overrides params.lag; x0 the start state (default:
     the plan's at t0, planned_state); bag_margin (m) the bag's corners keep from the keep-in
-    boxes' faces (the station's walls)."""
+    boxes' faces (the station's walls); guess: an earlier solution over this window (a replan)
+    as the initial guess and for the box assignment instead of the planned leg."""
     import casadi as ca
 
     from .model import casadi_points, casadi_step
@@ -181,7 +182,8 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
     step = casadi_step(params, int(math.ceil(grid / substep)), jit)
     points = casadi_points(params, corners)
     # the plan as the initial guess and for the box assignment
-    X0 = np.array([planned_state(leg, params, t) for t in ts])
+    X0 = np.array([planned_state(leg, params, t) for t in ts]) if guess is None else \
+        _resample(guess, ts)
     if x0 is not None:
         X0[0] = np.asarray(x0, float)
     pb, _ = pm.bag_centre(X0, params)
@@ -226,7 +228,9 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
             opti.subject_to(ca.sumsqr(xk[17:20]) <= (MARGIN * REST_OMEGA) ** 2 + st)
     opti.minimize(1e3 * ca.sum1(sb) + 1e6 * st + 1e-2 * effort)
     opti.set_initial(X, X0.T)
-    opti.set_initial(U, np.clip(X0[:-1, pm.A], -lim, lim).T)
+    U0 = X0[:-1, pm.A] if guess is None else \
+        guess.u[np.clip(np.searchsorted(guess.t, ts[:-1] + 1e-9, side="right") - 1, 0, len(guess.u) - 1)]
+    opti.set_initial(U, np.clip(U0, -lim, lim).T)
     opti.set_initial(sb, 0.0)
     opti.set_initial(st, 0.0)
     opti.solver("ipopt", {"print_time": bool(__import__("os").environ.get("ORACLE_TIME"))},
@@ -248,6 +252,13 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
     ok = bool(np.all(np.isfinite(xs))) and viol["box"] <= BOX_TOL and viol["rest_speed"] < REST_SPEED \
         and viol["rest_omega"] < REST_OMEGA and viol["goal"] <= tol_p and viol["attitude"] <= tol_a
     return OracleResult(ok, status, solve_time, ts, xs, us, viol, bump)
+
+
+def _resample(res: OracleResult, ts: np.ndarray) -> np.ndarray:
+    """res's states at times ts (linear between its nodes, quaternions renormalised)."""
+    k = np.clip(np.searchsorted(res.t, ts, side="right") - 1, 0, len(res.t) - 2)
+    s = np.clip((ts - res.t[k]) / (res.t[k + 1] - res.t[k]), 0.0, 1.0)[:, None]
+    return pm.normalise((1 - s) * res.x[k] + s * res.x[k + 1])
 
 
 def violations(xs: np.ndarray, ts: np.ndarray, p: pm.PairParams, leg: Leg, robot_box: np.ndarray,

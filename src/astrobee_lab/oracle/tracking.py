@@ -20,8 +20,12 @@ from astrobee_control import pair_model as pm
 
 from .solve import OracleResult
 
-# Bryson scales: the error each state may show and the wrench each axis may spend (the box)
-ERROR_SCALE = {"p": 0.05, "v": 0.01, "q_r": 0.05, "w_r": 0.01, "q_b": 1.0, "w_b": 0.02, "a": 1.0}
+# Bryson scales: the error each state may show and the wrench each axis may spend (the box).
+# Robot first: the bag's swing about the free pivot axes is not reachable at first order (the
+# test of this module), so weighting its error (q_b 1 rad, w_b 0.02 rad/s, SWING_SCALE) drags
+# the robot off the plan chasing it: flown, 0.4-0.8 m off and contacts (docs/results/oracle.md)
+ERROR_SCALE = {"p": 0.05, "v": 0.01, "q_r": 0.05, "w_r": 0.01, "q_b": 10.0, "w_b": 1.0, "a": 1.0}
+SWING_SCALE = {"q_b": 1.0, "w_b": 0.02}
 TERMINAL_WEIGHT = 10.0
 
 
