@@ -65,17 +65,30 @@ def main() -> None:
 
 
 def table(*paths: str) -> None:
-    rows = []
+    """The table of docs/results/oracle.md: feasible / seeds (Wilson 95%) and solve times."""
+    rows: dict = {}
     for path in paths:
         with open(path) as f:
-            rows += list(csv.DictReader(f))
-    print("| bump (N) | feasible / seeds | median solve time (s) | max solve time (s) |")
-    print("|---|---|---|---|")
-    for mag in sorted({float(r["magnitude"]) for r in rows}):
-        rs = [r for r in rows if float(r["magnitude"]) == mag]
+            for r in csv.DictReader(f):
+                rows.setdefault((float(r["magnitude"]), int(r["seed"])), r)
+    print("| bump (N) | feasible / seeds | Wilson 95% | median solve time (s) | max solve time (s) |")
+    print("|---|---|---|---|---|")
+    for mag in sorted({m for m, _ in rows}):
+        rs = [r for (m, _), r in rows.items() if m == mag]
         ok = sum(r["feasible"] == "True" for r in rs)
+        lo, hi = wilson(ok, len(rs))
         ts = [float(r["solve_time"]) for r in rs]
-        print(f"| {mag:g} | {ok} / {len(rs)} | {statistics.median(ts):.1f} | {max(ts):.1f} |")
+        print(f"| {mag:g} | {ok} / {len(rs)} | {100 * lo:.0f}%-{100 * hi:.0f}% | "
+              f"{statistics.median(ts):.1f} | {max(ts):.1f} |")
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of k successes in n."""
+    p = k / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / d
+    return max(0.0, c - h), min(1.0, c + h)
 
 
 if __name__ == "__main__":
