@@ -138,6 +138,7 @@ class FastFemBag(Bag):
             n = rot.rotate(st, self.handles[k])
             g["u"] = (e / np.linalg.norm(e)) @ R
             g["n"] = n @ R
+            g["nu"] = np.vstack([g["n"], g["u"]])        # rows: normal, rest axis (gripper frame)
             g["tw"] = twist_weights(self.num_nodes, a, b)
         self._grasps.append(g)
         self._rebuild_anchors()
@@ -216,9 +217,13 @@ class FastFemBag(Bag):
         grip = self._targets() if self._grasps else []
         frames = None
         if self._twists is not None:          # per twist: normal, rest axis, gripper omega
-            frames = np.array([np.concatenate([R @ g["n"], R @ g["u"], w])
-                               for g, (_, R, w) in zip(self._grasps, grip)
-                               if g["hold"].twist is not None])[:, None, :]
+            frames = np.empty((len(self._twists.halves), 1, 9))
+            t = 0
+            for g, (_, R, w) in zip(self._grasps, grip):
+                if g["hold"].twist is not None:
+                    frames[t, 0, :6] = (g["nu"] @ R.T).ravel()
+                    frames[t, 0, 6:] = w
+                    t += 1
         x_prev = x.copy()
         taus = self.springs.step(x, v, dt, self._anchors, self._target, self._target_vel,
                                  self.external, self._tethers, self._tether_target,
