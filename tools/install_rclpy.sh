@@ -65,7 +65,7 @@ PYEOF
 # --- interface packages built with the real rosidl ----------------------------------------------
 export AMENT_PREFIX_PATH="$PREFIX" CMAKE_PREFIX_PATH="$PREFIX"
 export PATH="$PREFIX/bin:$PATH" LD_LIBRARY_PATH="$PREFIX/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-BUILD=build/rclpy
+BUILD="$PREFIX/build"            # one build tree per venv (its CMake cache names this prefix)
 mkdir -p "$BUILD"
 # tf2_msgs is not on PyPI: the one message the graph publishes (/tf), from its interface text
 TF2="$BUILD/src/tf2_msgs"
