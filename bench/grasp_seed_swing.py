@@ -9,11 +9,17 @@ grasp=hinge, fast and Bullet solvers. Both on the project's robot, walls removed
 Experiment: a constant 1 N force on the robot at 30 deg from its arm line (the bag trails along
 -x body), attitude held by a stiff PD: the bag is a pendulum in the pseudo-gravity F/(M+m) and
 swings +-30 deg about the trailing direction. Printed: first swing, peaks/troughs, period,
-beside a rigid-pendulum estimate.
+how often the bag touched the robot's body (sampled every 7 steps), beside a rigid-pendulum
+estimate.
 
-    .venv/bin/python bench/grasp_seed_swing.py /path/to/front_handle.vtk [seed fast bullet]
+Why the seed's bag swings less: near 44 deg of swing its bag strikes the robot's aft-bottom
+corner (Bullet's soft-rigid contact with the robot's base, which the seed leaves on); `seed_free`
+is the same bag with that one contact pair off (docs/grasp.md).
+
+    .venv/bin/python bench/grasp_seed_swing.py /path/to/front_handle.vtk \
+        [seed seed_free fast bullet] [--seconds 36]
 """
-import sys
+import argparse
 import time
 
 import numpy as np
@@ -25,10 +31,11 @@ VTK = ""                    # the seed's front_handle.vtk (command line)
 KQ, KW = 3.0, 2.0
 
 
-def drive(p, c, robot, step_fn, centroid_fn, q0, x_b, z_b, dt):
-    """Push and hold attitude; (time, swing angle) every 7 steps, and the CPU seconds."""
+def drive(p, c, robot, step_fn, centroid_fn, q0, x_b, z_b, dt, touch_fn):
+    """Push and hold attitude; (time, swing angle) every 7 steps, the CPU seconds and how many
+    of those samples found the bag touching the robot's body (touch_fn)."""
     f = F * (np.cos(ALPHA) * x_b + np.sin(ALPHA) * z_b)
-    out = []
+    out, touched = [], 0
     n = int(T_END / dt)
     c0 = time.process_time()
     for i in range(n):
@@ -43,7 +50,8 @@ def drive(p, c, robot, step_fn, centroid_fn, q0, x_b, z_b, dt):
             tip, _ = robot.gripper_tip()
             d = centroid_fn() - tip
             out.append((i * dt, np.arctan2(-(d @ z_b), -(d @ x_b))))
-    return np.array(out), time.process_time() - c0
+            touched += bool(touch_fn())
+    return np.array(out), time.process_time() - c0, touched
 
 
 def analyse(tr):
@@ -59,8 +67,9 @@ def analyse(tr):
             "peaks": [round(float(th[i]), 1) for i in pk], "troughs": [round(float(th[i]), 1) for i in tr_]}
 
 
-def seed_bag():
-    """The seed's bag on our robot: (angle trace, CPU s, nodes)."""
+def seed_bag(robot_contact: bool = True):
+    """The seed's bag on our robot: (angle trace, CPU s, touching samples, nodes).
+    robot_contact False: its contact with the robot's base (body) turned off."""
     import pybullet as p
     from astrobee_sim.robot import Robot
     from astrobee_sim.bags.base import align
@@ -88,26 +97,33 @@ def seed_bag():
     p.setPhysicsEngineParameter(sparseSdfVoxelSize=0.25, physicsClientId=c)
     for ln in ("gripper", "arm_distal", "arm_proximal"):
         p.setCollisionFilterPair(bag, robot.id, -1, robot.links[ln], 0, physicsClientId=c)
+    if not robot_contact:
+        p.setCollisionFilterPair(bag, robot.id, -1, -1, 0, physicsClientId=c)
 
     def nodes():
         return np.asarray(p.getMeshData(bag, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=c)[1])
     x = nodes()
+    pins = []
     for s in (1, -1):
         target = centre + rot.rotate(q, hp + s * np.array([0.05, 0, 0]))
         i = int(np.argmin(np.linalg.norm(x - target, axis=1)))
         p.createSoftBodyAnchor(bag, i, robot.id, robot.links["gripper"], physicsClientId=c)
+        pins.append(x[i])
+    print("seed's mesh as a rigid pendulum: period %.2f s, pivot-centroid %.3f m, I_c %.3f kg m^2"
+          % mesh_estimate(x, 0.5 * (pins[0] + pins[1]), pins[0] - pins[1]))
     x_b = rot.rotate(qr, [1.0, 0, 0])
     z_b = rot.rotate(qr, [0, 0, 1.0])
 
     def step():
         robot.apply()
         p.stepSimulation(physicsClientId=c)
-    tr, cpu = drive(p, c, robot, step, lambda: nodes().mean(axis=0), qr, x_b, z_b, dt)
-    return tr, cpu, len(x)
+    tr, cpu, touched = drive(p, c, robot, step, lambda: nodes().mean(axis=0), qr, x_b, z_b, dt,
+                             lambda: p.getContactPoints(bag, robot.id, physicsClientId=c))
+    return tr, cpu, touched, len(x)
 
 
 def our_bag(solver, res):
-    """Our FEM bag (hinge) at the seed's size: (angle trace, CPU s, nodes)."""
+    """Our FEM bag (hinge) at the seed's size: (angle trace, CPU s, touching samples, nodes)."""
     from dataclasses import replace
     from astrobee.scenario import Scenario
     from astrobee_sim.simulation import Simulation
@@ -122,6 +138,9 @@ def our_bag(solver, res):
         sim.bag.walls = np.zeros((0, 6))
         sim.bag._walls_grown = np.zeros((0, 6))
     robot = sim.robots[""]
+    b = sim.bag
+    print("our mesh as a rigid pendulum: period %.2f s, pivot-centroid %.3f m, I_c %.3f kg m^2"
+          % mesh_estimate(b.mesh.nodes, b.handle_point(0), b.strap_axis(0)))
     _, qr, _, _ = robot.state()
     x_b = rot.rotate(qr, [1.0, 0, 0])
     z_b = rot.rotate(qr, [0, 0, 1.0])
@@ -129,10 +148,29 @@ def our_bag(solver, res):
     def step():
         sim.command(np.zeros(6), "")
         sim.step(1)
-    tr, cpu = drive(p, c, robot, step, lambda: sim.bag.points().mean(axis=0), qr, x_b, z_b, sim.dt)
+    if solver == "fast":      # the bag's contact push on the robot's body box, pending
+        def touch():
+            return any(e[5] is not None for e in sim.bag._pending)
+    else:
+        def touch():
+            return p.getContactPoints(sim.bag.id, robot.id, physicsClientId=c)
+    tr, cpu, touched = drive(p, c, robot, step, lambda: sim.bag.points().mean(axis=0), qr, x_b,
+                             z_b, sim.dt, touch)
     n = len(sim.bag.points())
     sim.close()
-    return tr, cpu, n
+    return tr, cpu, touched, n
+
+
+def mesh_estimate(x, pivot, axis, m=10.0, M=9.583788668):
+    """The same rigid pendulum with a mesh's own mass layout (equal node masses, as both FEM
+    bags spread their mass): (period s, pivot-centroid distance m, I_c about the axis kg m^2)."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    r = np.asarray(x, float) - pivot
+    r = r - np.outer(r @ axis, axis)
+    d = float(np.linalg.norm(r.mean(axis=0)))
+    i_c = m / len(r) * float((r ** 2).sum()) - m * d * d
+    g, mu = F / (M + m), m * M / (m + M)
+    return 2 * np.pi / np.sqrt(m * g * d / (i_c + mu * d * d)), d, i_c
 
 
 def estimate(m=10.0, M=9.583788668, d=0.125 + 0.035, W=0.25, H=0.42):
@@ -145,16 +183,20 @@ def estimate(m=10.0, M=9.583788668, d=0.125 + 0.035, W=0.25, H=0.42):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) < 2:
-        sys.exit(__doc__)
-    VTK = sys.argv[1]
-    which = sys.argv[2:] or ["seed", "fast", "bullet"]
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("vtk", help="the seed's front_handle.vtk")
+    ap.add_argument("which", nargs="*", default=["seed", "seed_free", "fast", "bullet"],
+                    choices=["seed", "seed_free", "fast", "bullet"])
+    ap.add_argument("--seconds", type=float, default=T_END)
+    a = ap.parse_args()
+    VTK, T_END, which = a.vtk, a.seconds, a.which
     print(f"pendulum estimate (rigid 10 kg box 0.50x0.25x0.42, pivot 0.16 m off its centre, robot "
           f"9.58 kg, {F} N): period {estimate():.2f} s; with our 0.165 m pivot "
           f"{estimate(d=0.165):.2f} s; amplitude {np.degrees(ALPHA):.0f} deg")
     for w in which:
-        if w == "seed":
-            tr, cpu, n = seed_bag()
+        if w.startswith("seed"):
+            tr, cpu, touched, n = seed_bag(robot_contact=(w == "seed"))
         else:
-            tr, cpu, n = our_bag(w, 480)
-        print(w, n, "nodes", f"cpu {cpu:.1f}s", analyse(tr), flush=True)
+            tr, cpu, touched, n = our_bag(w, 480)
+        print(w, n, "nodes", f"cpu {cpu:.1f}s", f"touching the robot in {touched} of {len(tr)} "
+              f"samples", analyse(tr), flush=True)
