@@ -15,7 +15,6 @@ knob handle_stiffness_scale.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -220,10 +219,9 @@ def twist_forces(x: np.ndarray, v: np.ndarray, w: np.ndarray, n: np.ndarray, u: 
     span (projected on the plane normal to n) from u about n: torque -(k angle + c rate) n.
 
     Returns (fa, torque_on_gripper), both (K, 3): fa the force on the span's first group's
-    centroid (spread over the nodes as w[:, None, None] * fa; the second group gets -fa)."""
-    kk = x.shape[1]
-    if kk == 1:             # one bag, every step: BLAS and plain floats
-        return _twist_one(w @ x[:, 0, :], w @ v[:, 0, :], n[0], u[0], w_grip[0], k, c)
+    centroid (spread over the nodes as w[:, None, None] * fa; the second group gets -fa).
+    The fast FEM bag runs the same formulas compiled (bags/hold_kernels.py) when numba is
+    installed; this is the numpy path and the batched rollouts'."""
     pos, neg = np.flatnonzero(w > 0), np.flatnonzero(w < 0)   # gathers: copies summed alike
     e = x[pos].mean(axis=0) - x[neg].mean(axis=0)
     de = v[pos].mean(axis=0) - v[neg].mean(axis=0)
@@ -234,22 +232,3 @@ def twist_forces(x: np.ndarray, v: np.ndarray, w: np.ndarray, n: np.ndarray, u: 
     tau = -(k * ang + c * rate)
     fa = (tau / e2)[:, None] * np.cross(n, e)
     return fa, -np.cross(e, fa)
-
-
-def _twist_one(e, de, n, u, wg, k: float, c: float):
-    """twist_forces for one copy, in floats (same formulas)."""
-    e0, e1, e2 = float(e[0]), float(e[1]), float(e[2])
-    n0, n1, n2 = float(n[0]), float(n[1]), float(n[2])
-    u0, u1, u2 = float(u[0]), float(u[1]), float(u[2])
-    en = e0 * n0 + e1 * n1 + e2 * n2
-    p0, p1, p2 = e0 - en * n0, e1 - en * n1, e2 - en * n2
-    ang = math.atan2((u1 * p2 - u2 * p1) * n0 + (u2 * p0 - u0 * p2) * n1 + (u0 * p1 - u1 * p0) * n2,
-                     u0 * p0 + u1 * p1 + u2 * p2)
-    ee = max(e0 * e0 + e1 * e1 + e2 * e2, 1e-12)
-    d0, d1, d2 = float(de[0]), float(de[1]), float(de[2])
-    rate = (((e1 * d2 - e2 * d1) * n0 + (e2 * d0 - e0 * d2) * n1 + (e0 * d1 - e1 * d0) * n2) / ee
-            - (float(wg[0]) * n0 + float(wg[1]) * n1 + float(wg[2]) * n2))
-    s = -(k * ang + c * rate) / ee
-    f0, f1, f2 = s * (n1 * e2 - n2 * e1), s * (n2 * e0 - n0 * e2), s * (n0 * e1 - n1 * e0)
-    fa = np.array([[f0, f1, f2]])
-    return fa, -np.array([[e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0]])
