@@ -32,8 +32,6 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from astrobee.bezier import control_points
 
-from .attitude_recovery import (RECOVERY_TIMES, AttitudePlan, attitude_candidates,  # noqa: F401
-                                recovery_profile, shortest_recovery)
 from .clearance import KeepIn
 from .law import BagObservation, Step
 from .handle_models import identified_handles, rotate_by

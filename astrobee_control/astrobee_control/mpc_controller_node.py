@@ -13,7 +13,6 @@ from __future__ import annotations
 import sys
 
 from .controller_node import run_registered
-from .mpc import make_mpc_law  # noqa: F401 - its old import path (tests)
 
 
 def main(argv: list[str] | None = None) -> int:

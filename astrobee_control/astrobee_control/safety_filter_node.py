@@ -31,7 +31,7 @@ from astrobee import msgconv as mc
 from roszen.runtime import node_main
 from roszen.parameters import read_only, runtime
 
-from .node_io import SAFETY, CarriedBag, SafetyDiagnostics, bag_descriptors, ekf_state  # noqa: F401
+from .node_io import CarriedBag, SafetyDiagnostics, bag_descriptors, ekf_state
 from .pd import State
 from .safety.law_filter import DEFAULT_MARGIN, LawFilter
 

@@ -20,13 +20,12 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from astrobee import config
 from astrobee.flight_modes import FlightMode
 from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.scenario import Scenario, ScenarioError
 
 from .bags.base import BagState
-from .world import World, sim_defaults  # noqa: F401 - sim_defaults lives with the station
+from .world import World
 
 # backend name -> "module:class" of its implementation (imported when asked for)
 _IMPLEMENTATIONS = {"pybullet": "astrobee_sim.simulation:Simulation",

@@ -25,11 +25,10 @@ from astrobee.flight_modes import FlightMode
 from astrobee.overrides import Overrides
 from astrobee.scenario import BagSpec, Scenario
 
-from .backend import (BagInfo, Contact, check_seed, resolve_scenario, sim_defaults,
-                      standing_overrides)
+from .backend import BagInfo, Contact, check_seed, resolve_scenario, standing_overrides
 from .bags.base import BagState, align
 from .robot import DISTAL_LEN, GRIPPER_LEN, MAX_ABS_WRENCH, PROXIMAL_LEN
-from .world import station
+from .world import sim_defaults, station
 
 _CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
 

@@ -19,7 +19,8 @@ from astrobee.overrides import OVERRIDE_KEYS, Overrides, parse_overrides
 from astrobee.realism import Disturbance, Realism
 from astrobee.scenario import Scenario, ScenarioError
 
-from .backend import BACKENDS, sim_defaults
+from .backend import BACKENDS
+from .world import sim_defaults
 
 CLOCK_MODES = ("realtime", "fast", "lockstep")
 # the scalar realism knobs, each a `realism.<knob>` parameter: Realism's float fields

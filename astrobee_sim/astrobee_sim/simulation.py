@@ -27,14 +27,13 @@ from astrobee.realism import Realism
 from astrobee.realism import resolve as resolve_realism
 from astrobee.scenario import Scenario, ScenarioError
 
-from .backend import (BagInfo, Contact, check_seed, resolve_scenario, sim_defaults,
-                      standing_overrides)
+from .backend import BagInfo, Contact, check_seed, resolve_scenario, standing_overrides
 from .bags import Bag, BagState, make_bag
 from .realism_effects import RealismEffects, bag_params
 from .robot import Robot
-from .world import build_pybullet, station
+from .world import build_pybullet, sim_defaults, station
 
-__all__ = ["Contact", "ScenarioError", "Simulation", "sim_defaults", "station"]
+__all__ = ["Contact", "ScenarioError", "Simulation"]
 
 
 class Simulation:

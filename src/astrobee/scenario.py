@@ -17,7 +17,7 @@ import yaml
 from . import config, flight_modes
 from . import rotations as rot
 from .errors import ScenarioError
-from .overrides import (BAG_MODELS, FEM_SOLVERS, MASS_RANGE, MAX_ROBOTS, NO_BAG,  # noqa: F401
+from .overrides import (BAG_MODELS, FEM_SOLVERS, MASS_RANGE, MAX_ROBOTS, NO_BAG,
                         OVERRIDE_KEYS, RESOLUTION_RANGE, Overrides, bag_variants,
                         default_grasp, grasp_names, parse_overrides)
 from .overrides import NAME as _NAME

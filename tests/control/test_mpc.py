@@ -11,7 +11,7 @@ from astrobee_control import sysid
 from astrobee_control.handle_models import HandleParams, RigidBodyParams, identified_handles
 from astrobee_control.law import BagObservation, ControlLaw
 from astrobee_control.mpc import MpcConfig, MpcLaw
-from astrobee_control.mpc_controller_node import make_mpc_law
+from astrobee_control.mpc import make_mpc_law
 from astrobee_control.pd import State
 from astrobee_control.reduced_model import ReducedModel
 from astrobee_control.reference import rest_to_rest

@@ -9,8 +9,9 @@ from astrobee import flight_modes
 from astrobee import rotations as rot
 from astrobee_control import mass as mp
 from astrobee_control.law import BagObservation
-from astrobee_control.mpc import (MpcConfig, MpcLaw, attitude_candidates, recovery_profile,
-                                  shortest_recovery)
+from astrobee_control.attitude_recovery import (attitude_candidates, recovery_profile,
+                                                shortest_recovery)
+from astrobee_control.mpc import MpcConfig, MpcLaw
 from astrobee_control.pd import State
 from astrobee_control.handle_models import RigidBodyParams
 from astrobee_control.reduced_model import ReducedModel, Rollouts, RolloutStart, compound_inertia

@@ -4,7 +4,7 @@ import pytest
 
 from astrobee import rotations as rot
 from astrobee_sim.bags import MODELS, VARIANTS, BagError, make_bag
-from astrobee_sim.simulation import ScenarioError
+from astrobee.errors import ScenarioError
 
 
 def drive(sim, wrench, seconds):

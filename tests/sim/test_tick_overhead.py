@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from astrobee_sim import world as world_mod
-from astrobee_sim.simulation import station
+from astrobee_sim.world import station
 
 roszen = pytest.importorskip("roszen")
 from roszen import codec  # noqa: E402

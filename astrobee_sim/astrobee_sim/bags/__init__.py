@@ -1,8 +1,9 @@
 """Cargo-bag models sharing one interface (base.Bag): fem, constraint, composite, rigid."""
 from __future__ import annotations
 
-from astrobee.scenario import BAG_MODELS as MODELS
-from astrobee.scenario import FEM_SOLVERS, default_fem_solver
+from astrobee.overrides import BAG_MODELS as MODELS
+from astrobee.overrides import FEM_SOLVERS
+from astrobee.scenario import default_fem_solver
 
 from .base import VARIANTS, Bag, BagError, BagState, handle_dirs
 
