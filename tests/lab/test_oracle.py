@@ -68,3 +68,13 @@ def test_bump_of_seed_is_the_simulators_draw():
     assert np.linalg.norm(b.force) == pytest.approx(5.0)
     assert so.bump_of_seed(3, 10.0).time == b.time            # the seed alone draws time, direction
     assert np.allclose(np.asarray(so.bump_of_seed(3, 10.0).force), 2 * np.asarray(b.force))
+
+
+def test_a_replan_from_a_mid_state_warm_starts_and_stays_feasible():
+    p = pm.PairParams()
+    leg = _leg(np.array([0.0, -0.35, 0.0]))
+    first = so.solve(leg, p, None, budget=12.0, x0=_start(p), jit=False)
+    k = len(first.t) // 3
+    again = so.solve(leg, p, None, budget=12.0, t0=float(first.t[k]), x0=first.x[k], guess=first, jit=False)
+    assert again.feasible, again.row()
+    assert again.t[0] == first.t[k] and np.allclose(again.x[0], first.x[k])
