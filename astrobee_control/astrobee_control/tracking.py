@@ -20,7 +20,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from astrobee.msgconv import MotionState
 
-from .law import BagObservation, Step, carried_mass  # noqa: F401 - Step: old import path
+from .law import BagObservation, Step, carried_mass
 from .mass import MassProperties
 from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdFeedback, Reference, State
 from .reference import SampledTrajectory
