@@ -34,6 +34,7 @@ setup(
             "mpc = astrobee_control.mpc:CONTROLLER",
             "pair = astrobee_control.pair_law:CONTROLLER",
             "wmpc = astrobee_control.wrench_mpc:CONTROLLER",
+            "pair_gov = astrobee_control.pair_governor:CONTROLLER",
             "pd_seed = astrobee_control.seed_pd:CONTROLLER",
         ],
     },

@@ -1,0 +1,314 @@
+"""The governed pair law (`pair_gov`): PD on the robot's pose, made aware of the bag it carries.
+
+The strap-held bag pivots on a ball joint at the gripper (~0.24 m from the robot's centre), so
+(i) every force of the position loop that is not along the arm pulls the bag across the lever
+and turns the robot (the strap force on the robot is ~ -(m_b / M) F at the grasp point), and
+(ii) a saturated attitude PD with 10 kg on the arm overshoots: its switching line (rate =
+Kp/Kd x error) asks for rates the torque limits cannot brake. This law keeps PD's position loop
+on the robot (the route through the hatch is the robot's) and changes three things:
+- attitude: the wanted rate towards the reference is at most sqrt(2 a |e|) per axis, a the
+  angular deceleration the torque limits give on the pair's inertia (`inertia`: robot alone,
+  `pivot` robot + bag on the grasp, `rigid` bag fixed to the robot) x `inertia_scale`;
+- allocation: the body wrench by allocation.allocate, the force's torque through the grasp
+  counted (lever (m_b / M) g; `lever: false` treats the force as acting at the centre of mass),
+  the torque weighted up with the attitude error (attitude first);
+- re-timing: the reference runs on a progress clock s' = sigma in [0, 1]: sigma drops as the
+  attitude error, the robot's rate or the bag's relative speed grow, so a disturbed pair stops
+  on its route, recovers, and goes on instead of chasing the clock (`retime: false`: ablation).
+Measured numbers: the docstring of the study's report (see the module's README line).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from astrobee import rotations as rot
+from astrobee.flight_modes import FlightMode
+
+from . import allocation
+from .law import BagObservation, Step
+from .mass import MassProperties
+from .pd import MODE_NOMINAL, Output, Reference, State
+from .registry import Controller
+from .tracking import CONTROLLING, STOPPING, Tracker
+
+INERTIAS = ("robot", "pivot", "rigid", "centre")
+
+
+@dataclass
+class GovConfig:
+    """The governed pair law's parameters (also the node's ROS parameters of the same names)."""
+
+    grasp: tuple = (-0.234, 0.0, -0.065)  # m, the grasp point, robot body frame
+    inertia: str = "rigid"       # the attitude loop's inertia (module docstring)
+    momentum: float = 0.0        # 0..1: the rate the attitude loop damps: the robot's (0) or
+                                 # the pair's, its angular momentum over its inertia (1)
+    inertia_scale: float = 1.0   # x that inertia (ablation: 0.8 / 1.2)
+    brake_share: float = 0.6     # share of the torque limit the rate limit plans to brake with
+    lever: bool = False          # the force's torque through the grasp counts in the allocation
+    w_torque: float = 3.0        # allocation: torque weight (force weight 1) at full attitude share
+    attitude_share: float = 3.0  # ... reached at this multiple of the attitude tolerance
+    retime: bool = False         # the progress clock (False: follow the plan's clock)
+    att_slow: float = 0.15       # rad: attitude error where the progress starts to slow ...
+    att_stop: float = 0.35       # ... and where it stops
+    rate_slow: float = 0.04      # rad/s: robot rate where it starts to slow ...
+    rate_stop: float = 0.10      # ... and stops
+    swing_slow: float = 0.03     # m/s: bag speed relative to the robot where it starts ...
+    swing_stop: float = 0.08     # ... and stops
+    sigma_rate: float = 0.5      # 1/s: how fast the progress rate may rise (it falls at once)
+    max_delay: float = 15.0      # s the route may fall behind the plan's clock (then it goes on)
+    settle_time: float = 5.0
+
+    def validate(self) -> "GovConfig":
+        """Raise ValueError (one line) for a value the law cannot run with."""
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "grasp":
+                if len(v) != 3 or not all(isinstance(x, (int, float)) and math.isfinite(x)
+                                          for x in v):
+                    raise ValueError(f"grasp must be three finite numbers (m), got {v!r}")
+            elif f.name == "inertia":
+                if v not in INERTIAS:
+                    raise ValueError(f"inertia must be one of {', '.join(INERTIAS)}, got {v!r}")
+            elif f.name in ("lever", "retime"):
+                if not isinstance(v, (bool, np.bool_)):
+                    raise ValueError(f"{f.name} must be true or false, got {v!r}")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v < 0:
+                raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
+        for name in ("inertia_scale", "settle_time", "sigma_rate"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        if not 0 <= self.momentum <= 1:
+            raise ValueError(f"momentum must be in [0, 1], got {self.momentum!r}")
+        if not 0 < self.brake_share <= 1:
+            raise ValueError(f"brake_share must be in (0, 1], got {self.brake_share!r}")
+        for a, b in (("att_slow", "att_stop"), ("rate_slow", "rate_stop"),
+                     ("swing_slow", "swing_stop")):
+            if not getattr(self, a) < getattr(self, b):
+                raise ValueError(f"{a} ({getattr(self, a)}) must be below {b} "
+                                 f"({getattr(self, b)})")
+        return self
+
+    @classmethod
+    def from_params(cls, params: dict) -> "GovConfig":
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: (tuple(v) if k == "grasp" else v) for k, v in params.items()
+                      if k in names}).validate()
+
+
+def rate_limited(e: np.ndarray, k: np.ndarray, alpha_max: np.ndarray, w_max: float
+                 ) -> np.ndarray:
+    """The body rate wanted towards an attitude error e: k e, at most sqrt(2 alpha e) per axis
+    (the robot can still brake to rest at the reference) and w_max."""
+    mag = np.abs(e)
+    return np.sign(e) * np.minimum(k * mag, np.minimum(np.sqrt(2.0 * alpha_max * mag), w_max))
+
+
+def ramp(x: float, lo: float, hi: float) -> float:
+    """1 below lo, 0 above hi, linear between."""
+    return float(np.clip((hi - x) / (hi - lo), 0.0, 1.0))
+
+
+class GovController:
+    """One wrench per state and reference (the PdFeedback interface the Tracker drives)."""
+
+    def __init__(self, flight_mode: FlightMode, mass: MassProperties, config: GovConfig) -> None:
+        self.flight_mode = flight_mode
+        self.mass = mass                   # the robot's own
+        self.config = config
+        self.bag: BagObservation | None = None
+        self.swing_speed = 0.0             # m/s, bag relative to the robot (last observation)
+
+    def reset(self) -> None:
+        """Nothing integrates."""
+
+    def set_flight_mode(self, mode: FlightMode) -> None:
+        self.flight_mode = mode
+
+    def set_mass(self, mass: MassProperties) -> None:
+        self.mass = mass
+
+    def figures(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """(pair mass, the force's lever through the grasp, the attitude loop's inertia)."""
+        cfg = self.config
+        m_r, I_r = float(self.mass.mass), np.asarray(self.mass.inertia, float)
+        bag = self.bag
+        if bag is None or bag.mass <= 0:
+            return m_r, np.zeros(3), I_r * cfg.inertia_scale
+        m_b = float(bag.mass)
+        M = m_r + m_b
+        g = np.asarray(cfg.grasp, float)
+        lever = (m_b / M) * g if cfg.lever else np.zeros(3)
+        if cfg.inertia == "robot":
+            inertia = I_r
+        elif cfg.inertia == "centre":
+            inertia = self.pair_inertia()
+        elif cfg.inertia == "pivot":
+            mu = m_r * m_b / M
+            inertia = I_r + mu * (g @ g * np.eye(3) - np.outer(g, g))
+        else:
+            d = np.asarray(self._offset, float)
+            from .mass import box_inertia
+            inertia = I_r + box_inertia(m_b, bag.size) + m_b * (d @ d * np.eye(3) - np.outer(d, d))
+        return M, lever, inertia * cfg.inertia_scale
+
+    def pair_inertia(self) -> np.ndarray:
+        """The pair's inertia about its centre of mass as it is now (robot body frame)."""
+        from .mass import box_inertia
+        bag = self.bag
+        m_r, m_b = float(self.mass.mass), float(bag.mass)
+        d = np.asarray(self._offset, float)
+        Rb = self._bag_rot
+        return (np.asarray(self.mass.inertia, float) + Rb @ box_inertia(m_b, bag.size) @ Rb.T
+                + m_r * m_b / (m_r + m_b) * (d @ d * np.eye(3) - np.outer(d, d)))
+
+    def pair_rate(self, state: State) -> np.ndarray:
+        """The pair's angular momentum about its centre over its inertia (body frame, rad/s)."""
+        from .mass import box_inertia
+        bag = self.bag
+        R = rot.to_matrix(rot.normalize(state.orientation))
+        m_r, m_b = float(self.mass.mass), float(bag.mass)
+        M = m_r + m_b
+        d = R @ np.asarray(self._offset, float)              # robot -> bag, world
+        dv = np.asarray(bag.velocity, float) - np.asarray(state.velocity, float)
+        Rb = R @ self._bag_rot
+        I_r = R @ np.asarray(self.mass.inertia, float) @ R.T
+        I_b = Rb @ box_inertia(m_b, bag.size) @ Rb.T
+        H = I_r @ (R @ np.asarray(state.omega, float)) + I_b @ np.asarray(bag.omega, float) \
+            + (m_r * m_b / M) * np.cross(d, dv)
+        I_c = I_r + I_b + (m_r * m_b / M) * (d @ d * np.eye(3) - np.outer(d, d))
+        return R.T @ np.linalg.solve(I_c, H)
+
+    def observe(self, bag: BagObservation | None, robot: State | None) -> None:
+        if bag is None or not bag.attached or robot is None or bag.mass <= 0:
+            self.bag, self.swing_speed = None, 0.0
+            return
+        self.bag = bag
+        self._offset, self._bag_rot = bag.offset_in(robot)
+        self.swing_speed = float(np.linalg.norm(np.asarray(bag.velocity, float)
+                                                - np.asarray(robot.velocity, float)))
+
+    def step(self, state: State, ref: Reference, dt: float) -> Output:
+        """The body wrench for `state` tracking the robot reference `ref`."""
+        fm, cfg = self.flight_mode, self.config
+        q = rot.normalize(state.orientation)
+        R = rot.to_matrix(q)
+        w = np.asarray(state.omega, float)
+        M, lever, I = self.figures()
+        e_p = np.asarray(ref.position, float) - np.asarray(state.position, float)
+        e_v = np.asarray(ref.velocity, float) - np.asarray(state.velocity, float)
+        a_w = np.asarray(ref.accel, float) + fm.pos_kp * e_p + fm.vel_kd * e_v
+        f_des = R.T @ (M * a_w)
+        e_att = rot.attitude_error(q, ref.orientation)
+        t_lim, f_lim = np.asarray(fm.max_torque, float), np.asarray(fm.max_force, float)
+        alpha_max = cfg.brake_share * t_lim / np.diag(I)
+        w_des = R.T @ np.asarray(ref.omega, float) + rate_limited(
+            e_att, fm.att_kp / fm.omega_kd, alpha_max, float(fm.hard_limit_omega))
+        w_fb = w
+        if cfg.momentum > 0 and self.bag is not None and self.bag.mass > 0:
+            w_fb = (1 - cfg.momentum) * w + cfg.momentum * self.pair_rate(state)
+        al_b = R.T @ np.asarray(ref.alpha, float) + fm.omega_kd * (w_des - w_fb)
+        tau_des = I @ al_b + np.cross(w, I @ w)
+        if fm.control_enabled:
+            share = float(np.clip(np.linalg.norm(e_att) / (cfg.attitude_share *
+                                                           fm.tolerance_att), 0.1, 1.0))
+            force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
+                                                1.0, cfg.w_torque * share)
+        else:
+            force, torque = np.zeros(3), np.zeros(3)
+        return Output(force=force, torque=torque, accel=R.T @ a_w, alpha=al_b,
+                      position_error=e_p, position_error_integrated=np.zeros(3),
+                      attitude_error=e_att, attitude_error_integrated=np.zeros(3),
+                      attitude_error_mag=float(np.linalg.norm(e_att)),
+                      saturated=bool(np.any(np.abs(f_des) > f_lim)
+                                     or np.any(np.abs(tau_des) > t_lim)))
+
+
+class GovLaw(Tracker):
+    """The governed pair ControlLaw: the PD law's state machine, a GovController, and the
+    progress clock (module docstring)."""
+
+    name = "pair_gov"
+
+    def __init__(self, flight_mode: FlightMode, mass: MassProperties,
+                 config: GovConfig | None = None, hold_on_start: bool = True) -> None:
+        config = (config or GovConfig()).validate()
+        super().__init__(flight_mode, mass, settle_time=config.settle_time,
+                         hold_on_start=hold_on_start)
+        self.pd = GovController(flight_mode, mass, config)
+        self.config = config
+        self.progress = 0.0      # s on the segment's clock
+        self.sigma = 1.0
+        self._last = None
+        self._t0 = 0.0
+
+    def observe_bag(self, bag: BagObservation | None, robot: State | None) -> None:
+        self.carrying = bag is not None and bag.attached and robot is not None
+        self.pd.observe(bag, robot)
+
+    def follow(self, traj, now: float) -> None:
+        super().follow(traj, now)
+        self.progress, self.sigma, self._last = self.traj.start_time, 1.0, now
+        self._t0 = now - self.traj.start_time
+
+    def governor(self, state: State, ref: Reference) -> float:
+        """The progress rate wanted now (1: on the clock, 0: pause)."""
+        cfg = self.config
+        e = rot.angle_between(state.orientation, ref.orientation)
+        return min(ramp(e, cfg.att_slow, cfg.att_stop),
+                   ramp(float(np.linalg.norm(state.omega)), cfg.rate_slow, cfg.rate_stop),
+                   ramp(self.pd.swing_speed, cfg.swing_slow, cfg.swing_stop))
+
+    def update(self, state: State, now: float, dt: float) -> Step:
+        """One tick; while a segment is followed, the reference runs on the progress clock."""
+        if not (self.config.retime and self.state == CONTROLLING and self.traj is not None):
+            return super().update(state, now, dt)
+        traj = self.traj
+        h = max(0.0, now - (self._last if self._last is not None else now))
+        self._last = now
+        ref_now = traj.sample(min(self.progress, traj.end_time))
+        want = self.governor(state, ref_now)
+        if now - self.progress > self.config.max_delay + self._t0:
+            want = 1.0
+        self.sigma = want if want < self.sigma else min(want, self.sigma + self.config.sigma_rate * h)
+        self.progress += self.sigma * h
+        if self.progress >= traj.end_time:
+            self.hold = traj.final()
+            self.traj = None
+            self._stopping_since = now
+            self._transition(STOPPING, "end of segment")
+            return super().update(state, now, dt)
+        r = traj.sample(self.progress)
+        s = self.sigma
+        ref = Reference(r.position, s * np.asarray(r.velocity), s * s * np.asarray(r.accel),
+                        r.orientation, s * np.asarray(r.omega), s * s * np.asarray(r.alpha))
+        return self._step(self.pd.step(state, ref, dt), ref, MODE_NOMINAL)
+
+
+_CFG = asdict(GovConfig())
+PARAMETERS = {**{k: (list(v) if isinstance(v, tuple) else v) for k, v in _CFG.items()},
+              "hold_on_start": True}
+
+
+def check_params(params: dict) -> None:
+    """The law's parameters (complete), checked without building it (one-line errors)."""
+    GovConfig.from_params(params)
+    if not isinstance(params.get("hold_on_start", True), bool):
+        raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")
+
+
+def make_gov_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> GovLaw:
+    """The governed pair law of the parameters (ValueError with one line for a bad value)."""
+    params = {**PARAMETERS, **params}
+    check_params(params)
+    return GovLaw(flight_mode, mass, GovConfig.from_params(params),
+                  hold_on_start=bool(params["hold_on_start"]))
+
+
+CONTROLLER = Controller("pair_gov", make_gov_law, PARAMETERS, check_params,
+                        "PD on the robot with a torque-aware attitude loop, the force's torque "
+                        "through the grasp in the allocation, and a progress clock that pauses "
+                        "the route while the pair is disturbed")

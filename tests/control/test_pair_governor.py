@@ -1,0 +1,89 @@
+"""The governed pair law (astrobee_control.pair_governor): the torque-aware attitude rate, the
+progress clock that pauses a disturbed pair, PD's force when nothing saturates, registered,
+bad parameters one line each. Synthetic states only (milliseconds)."""
+import numpy as np
+import pytest
+
+from astrobee import flight_modes
+from astrobee import rotations as rot
+from astrobee_control import mass as mp
+from astrobee_control import registry
+from astrobee_control.law import BagObservation
+from astrobee_control.pair_governor import GovConfig, make_gov_law, rate_limited
+from astrobee_control.pd import Reference, State
+from astrobee_control.reference import rest_to_rest
+
+Q = np.array([0.0, 0.0, 0.0, 1.0])
+FM = flight_modes.get("nominal")
+
+
+def bag_at(st: State) -> BagObservation:
+    return BagObservation(st.position + rot.rotate(st.orientation, np.array([-0.484, 0, -0.065])),
+                          st.orientation, np.asarray(st.velocity, float), np.zeros(3), True,
+                          10.0, np.array([0.5, 0.42, 0.25]), "constraint")
+
+
+def test_rate_limit_can_brake():
+    """The wanted rate is never more than the rate the deceleration can stop within the error."""
+    e = np.linspace(-3, 3, 61)[:, None] * np.ones(3)
+    a = np.array([0.01, 0.02, 0.03])
+    w = np.array([rate_limited(x, np.full(3, 1.25), a, 0.17) for x in e])
+    assert np.all(w ** 2 <= 2 * a * np.abs(e) + 1e-12)
+    assert np.all(np.sign(w) == np.sign(e))
+
+
+def test_unsaturated_force_is_pd_of_the_pair_mass():
+    law = make_gov_law(FM, mp.robot(), {})
+    st = State(np.zeros(3), np.zeros(3), Q, np.zeros(3))
+    law.observe_bag(bag_at(st), st)
+    out = law.pd.step(st, Reference(np.array([0.01, 0.0, 0.0]), orientation=Q), 0.016)
+    M = float(mp.robot().mass) + 10.0
+    np.testing.assert_allclose(out.force, [M * 0.6 * 0.01, 0, 0], atol=1e-9)
+
+
+def fly_reference(params: dict, turned: float) -> np.ndarray:
+    """Reference positions the law tracks over 3 s of a 2 m leg, the robot held at the start
+    but turned `turned` rad off the reference attitude."""
+    law = make_gov_law(FM, mp.robot(), params)
+    q = rot.from_rotvec(np.array([0.0, 0.0, turned]))
+    st = State(np.zeros(3), np.zeros(3), q, np.zeros(3))
+    law.observe_bag(bag_at(st), st)
+    law.update(st, 0.0, 0.016)
+    law.follow(rest_to_rest(np.zeros(3), np.array([2.0, 0.0, 0.0]), Q, Q, 30.0), 0.0)
+    refs = [law.update(st, k * 0.016, 0.016).reference.position for k in range(1, 190)]
+    return np.array(refs)
+
+
+def test_progress_pauses_while_the_pair_is_turned():
+    calm, turned = fly_reference({"retime": True}, 0.0), fly_reference({"retime": True}, 0.6)
+    clock = fly_reference({"retime": False}, 0.6)
+    assert calm[-1, 0] > 0.01 and clock[-1, 0] == pytest.approx(calm[-1, 0], rel=1e-6)
+    assert turned[-1, 0] < 1e-6          # the route waits for the attitude
+
+
+def test_registered():
+    assert "pair_gov" in registry.names()
+    assert registry.get("pair_gov").make(FM, mp.robot()).name == "pair_gov"
+
+
+@pytest.mark.parametrize("params, words", [
+    ({"inertia": "glued"}, "inertia must be one of robot, pivot, rigid"),
+    ({"inertia_scale": 0.0}, "inertia_scale must be > 0"),
+    ({"brake_share": 1.5}, "brake_share must be in (0, 1]"),
+    ({"lever": "yes"}, "lever must be true or false"),
+    ({"retime": 1}, "retime must be true or false"),
+    ({"att_slow": 0.5, "att_stop": 0.4}, "att_slow (0.5) must be below att_stop (0.4)"),
+    ({"grasp": [0.0, 1.0]}, "grasp must be three finite numbers"),
+    ({"w_torque": "x"}, "w_torque must be a finite number >= 0"),
+    ({"hold_on_start": 2}, "hold_on_start must be true or false"),
+])
+def test_bad_parameters_one_line(params, words):
+    with pytest.raises(ValueError) as err:
+        registry.get("pair_gov").check_params(params)
+    assert words in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(ValueError):
+        make_gov_law(FM, mp.robot(), params)
+
+
+def test_config_defaults_valid():
+    GovConfig().validate()
