@@ -131,20 +131,32 @@ def qos_from_args(args, base=None):
     return q.with_(**kw) if kw else q
 
 
-def make_node(prefix: str = "_roszen_cli"):
-    """A hidden helper node for one command, graph ready (the discovery `get` answered)."""
+def make_node(prefix: str = "_roszen_cli", name: str | None = None):
+    """A hidden helper node for one command (named `name` if given), graph ready (the discovery
+    `get` answered), on the runtime ASTROBEE_RUNTIME picks (roszen.runtime): on rclpy,
+    roszen.rclpy_backend.cli's node, the verbs' code unchanged over it."""
     import os
 
+    from roszen import runtime
+    try:
+        on_rclpy = runtime.name() == "rclpy"
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if on_rclpy:
+        from roszen.rclpy_backend.cli import make_node as rclpy_node
+        return rclpy_node(name or f"{prefix}_{os.getpid()}")
     from roszen.node import Node
     from roszen.zconfig import ConfigError
     try:
-        node = Node(f"{prefix}_{os.getpid()}", start_parameter_services=False,
+        node = Node(name or f"{prefix}_{os.getpid()}", start_parameter_services=False,
                     enable_rosout=False)
     except ConfigError as exc:
         raise CliError(str(exc)) from None
     except Exception as exc:   # zenoh cannot open the session (router unreachable, bad config)
         raise CliError(f"cannot join the ROS graph: {exc}") from None
     node.context.graph.wait_ready(3.0)
+    if name is not None:       # a node named by the user (topic pub -n): as before, not primed
+        return node
     # no router: the context has said so once (roszen.context.NO_ROUTER), not repeated here
     prime_graph(node)
     return node

@@ -442,13 +442,11 @@ def pub_cmd(args) -> int:
         wait_subs = 1 if times else 0
     if args.node_name:
         from roszen.names import InvalidNameError, validate_node_name
-        from roszen.node import Node
         try:
             validate_node_name(args.node_name)     # before joining the graph
         except InvalidNameError as exc:
             raise CliError(str(exc)) from None
-        node = Node(args.node_name, start_parameter_services=False, enable_rosout=False)
-        node.context.graph.wait_ready(3.0)
+        node = make_node(name=args.node_name)
     else:
         node = make_node()
     try:

@@ -12,6 +12,7 @@ from typing import Any, Callable
 
 from .. import codec
 from ..qos import QoSProfile, as_qos
+from ..types.cdr import MessageDecodeError
 
 
 def rosidl_class(type_name: str, kind: str = "msg") -> type:
@@ -68,7 +69,32 @@ def to_rosidl(msg: Any, support: codec.MsgSupport, cls: type) -> Any:
 def from_rosidl(obj: Any, support: codec.MsgSupport) -> Any:
     """A rosidl object as roszen's message (through its CDR bytes)."""
     from rclpy.serialization import serialize_message
-    return support.deserialize(serialize_message(obj))
+    return decode(support, serialize_message(obj))
+
+
+def decode(support: codec.MsgSupport, data: bytes) -> Any:
+    """roszen's message from CDR bytes rmw_fastrtps may have padded: Fast-CDR's size estimate
+    can leave bytes after the message (8 per rcl_interfaces ParameterValue: a GetParameters
+    response of one double is 64 bytes for 56), more than roszen's decoder accepts (3). Only when
+    the whole payload is refused for trailing bytes, the message's own length is searched for
+    (bisection: a shorter cut fails to decode, a longer one has trailing bytes)."""
+    try:
+        return support.deserialize(data)
+    except MessageDecodeError as exc:
+        if "trailing bytes" not in str(exc):
+            raise
+        first = exc
+    lo, hi = 4, len(data) - 1
+    while lo <= hi:
+        mid = (lo + hi) // 2
+        try:
+            return support.deserialize(data[:mid])
+        except MessageDecodeError as exc:
+            if "trailing bytes" in str(exc):
+                hi = mid - 1
+            else:
+                lo = mid + 1
+    raise first
 
 
 def guarded(callback: Callable, log: Any, what: str, count: list) -> Callable:

@@ -14,7 +14,8 @@ from .. import codec
 from ..clock import Time
 from ..endpoint import _arity
 from ..qos import CLOCK
-from .bridge import from_rosidl, guarded, rclpy_qos, rosidl_class, to_rosidl, type_name_of
+from .bridge import (decode, from_rosidl, guarded, rclpy_qos, rosidl_class, to_rosidl,
+                     type_name_of)
 from .params import RclpyParameters
 
 
@@ -69,15 +70,17 @@ def wall_clock(use_sim_time: bool = False) -> Clock:
 
 
 class EndpointInfo:
-    """rclpy's TopicEndpointInfo with roszen's `node_fqn`, `ros_type`, `qos` (a roszen profile;
-    what DDS discovery does not tell, roszen's defaults), `type_hash` (the advertised RIHS01
-    string) and `token` (a key naming the endpoint)."""
+    """rclpy's TopicEndpointInfo with roszen's `node_fqn`, `namespace`, `ros_type`, `gid`, `qos`
+    (a roszen profile; what DDS discovery does not tell, roszen's defaults), `type_hash` (the
+    advertised RIHS01 string) and `token` (a key naming the endpoint)."""
 
     def __init__(self, info: Any, topic: str = "") -> None:
         from ..qos import Durability, QoSProfile, Reliability
         self.info = info
         ns = info.node_namespace.rstrip("/")
         self.node_fqn = f"{ns}/{info.node_name}"
+        self.namespace = info.node_namespace
+        self.gid = bytes(info.endpoint_gid)
         self.ros_type = info.topic_type
         q = info.qos_profile
         rel, dur = int(q.reliability), int(q.durability)
@@ -114,7 +117,7 @@ class Client:
     """A service client: call_async(roszen request) -> a future of the roszen response."""
 
     def __init__(self, node: "Node", type_name: str, name: str) -> None:
-        self._support = codec.srv_support(type_name)
+        self._sup = codec.srv_support(type_name)     # `_sup`: as roszen's Client (ParameterClient)
         self._cls = rosidl_class(type_name, "srv")
         self._cli = node._rnode.create_client(self._cls, name)
         self._node = node
@@ -126,8 +129,8 @@ class Client:
         return self._cli.service_is_ready()
 
     def call_async(self, request: Any) -> "Future":
-        req = to_rosidl(request, self._support.request, self._cls.Request)
-        return Future(self._cli.call_async(req), self._support.response)
+        req = to_rosidl(request, self._sup.request, self._cls.Request)
+        return Future(self._cli.call_async(req), self._sup.response)
 
     def call(self, request: Any, timeout_sec: Optional[float] = None) -> Any:
         """Spin this node until the answer comes (TimeoutError after timeout_sec)."""
@@ -212,7 +215,7 @@ class Node(RclpyParameters):
         else:
             def cb(data: bytes) -> None:
                 try:
-                    msg = support.deserialize(data)
+                    msg = decode(support, data)
                 except Exception as exc:  # noqa: BLE001 - drop and say so, as roszen does
                     log.error(f"dropped a sample on {topic}: malformed CDR payload "
                               f"({len(data)} bytes) for {name}: {exc}")
@@ -254,6 +257,9 @@ class Node(RclpyParameters):
 
     def destroy_publisher(self, pub: Any) -> bool:
         return self._rnode.destroy_publisher(pub._pub if isinstance(pub, Publisher) else pub)
+
+    def destroy_client(self, client: Any) -> bool:
+        return self._rnode.destroy_client(client._cli if isinstance(client, Client) else client)
 
     # -- graph ------------------------------------------------------------------------------
     def count_publishers(self, topic: str) -> int:
