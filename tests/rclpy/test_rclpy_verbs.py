@@ -1,8 +1,9 @@
 """The `astrobee` verbs on an rclpy graph (ASTROBEE_RUNTIME=rclpy, rmw_fastrtps_cpp; `make
-test-rclpy`): topic list/echo/hz/pub, param get/set, service call against a project node run on
-real rclpy through roszen.runtime, and `bag play` of a small recorded bag (raw bytes, a latched
-topic, the player's /clock) heard by a plain rclpy subscriber (rosidl classes, no project
-code). Skipped where rclpy or std_msgs/std_srvs of rosidl cannot be imported."""
+test-rclpy`): topic list/echo/hz/pub, param get/set/list, service list/call and node info
+against a project node run on real rclpy through roszen.runtime; `bag play` of a small recorded
+bag (raw bytes, a latched topic, the player's /clock) heard by a plain rclpy subscriber (rosidl
+classes, no project code) and recorded again by `bag record --use-sim-time`. Skipped where
+rclpy or std_srvs of rosidl cannot be imported."""
 from __future__ import annotations
 
 import json
@@ -137,12 +138,18 @@ def test_param_get_and_set_on_a_running_node(env, talker):
     assert "gain=2.5" in echo.stdout, echo.stdout + echo.stderr
 
 
-def test_service_list_and_call(env, talker):
+def test_service_list_call_and_node_info(env, talker):
     listed = astrobee(env, "service", "list", "-t")
     assert "/toggle [std_srvs/srv/SetBool]" in listed.stdout.splitlines(), listed.stdout
     called = astrobee(env, "service", "call", "/toggle", "std_srvs/srv/SetBool", "{data: true}")
     assert called.returncode == 0, called.stderr
     assert "success=True" in called.stdout and "toggled True" in called.stdout, called.stdout
+    info = astrobee(env, "node", "info", "/talker")
+    assert info.returncode == 0, info.stderr
+    lines = info.stdout.splitlines()
+    servers = lines.index("  Service Servers:")
+    assert "    /toggle: std_srvs/srv/SetBool" in lines[servers:], info.stdout
+    assert "    /heard: std_msgs/msg/String" in lines[:lines.index("  Publishers:")], info.stdout
 
 
 def test_topic_pub_is_heard_and_hz_measures(env, talker):
@@ -187,26 +194,40 @@ def _write_bag(path: Path) -> int:
 
 
 def test_bag_play_is_heard_by_a_plain_rclpy_subscriber(env, tmp_path):
+    """...and `bag record --use-sim-time` on rclpy records the played topic on the player's
+    /clock: the bag's own time comes back."""
+    from roszen.bag.reader import BagReader
     t0 = _write_bag(tmp_path / "bag")
     stop_file = tmp_path / "stop"
     listener = testing.spawn([sys.executable, "-c", LISTENER, str(stop_file), str(4 * WAIT)],
                              env)
+    recorder = testing.spawn([*ASTROBEE, "bag", "record", "--use-sim-time", "-o",
+                              str(tmp_path / "again"), "/played"], env)
     try:
         testing.read_until(listener, "ready", timeout=WAIT)
+        testing.read_until(recorder, "Recording...", timeout=WAIT, stream="stderr")
         # -d 1: Fast DDS matches the player's new publishers with the listener first
         played = astrobee(env, "bag", "play", str(tmp_path / "bag"), "--clock", "20", "-d", "1")
         time.sleep(0.5)
         stop_file.write_text("")
         out, _ = listener.communicate(timeout=WAIT)
+        recorder.send_signal(signal.SIGINT)
+        recorded = recorder.wait(WAIT)
     finally:
         testing.stop(listener, timeout=5.0)
+        testing.stop(recorder, timeout=5.0)
     assert played.returncode == 0, played.stderr
     assert "Played 21 messages" in played.stderr, played.stderr
     got = json.loads(out.strip().splitlines()[-1])
     assert got["latched"] == ["mode"]
-    played = got["played"]
-    assert len(played) >= 15, played                  # volatile: matching may miss the first
-    assert played == [f"recorded {i}" for i in range(20 - len(played), 20)]
+    heard = got["played"]
+    assert len(heard) >= 15, heard                    # volatile: matching may miss the first
+    assert heard == [f"recorded {i}" for i in range(20 - len(heard), 20)]
     clock = got["clock"]                               # the bag's time, from its start on
     assert len(clock) >= 10 and clock == sorted(clock), clock
     assert t0 <= clock[0] and clock[-1] <= t0 + 1_100_000_000, (clock[0] - t0, clock[-1] - t0)
+
+    assert recorded == 0
+    again = list(BagReader(str(tmp_path / "again")).messages())
+    assert len(again) >= 15 and {m.topic.name for m in again} == {"/played"}
+    assert all(t0 <= m.log_time_ns <= t0 + 1_100_000_000 for m in again)   # sim time stamps

@@ -119,11 +119,16 @@ def record_cmd(args) -> int:
                                flush_interval=args.flush_interval)
         except (BagError, OSError) as exc:
             raise CliError(str(exc)) from None
+        from roszen import runtime
+        on_rclpy = runtime.name() == "rclpy"
         recorder = Recorder(node, writer, topics=topics, regex=args.regex,
                             exclude=args.exclude_regex, exclude_topics=_names(args.exclude_topics),
-                            use_sim_time=args.use_sim_time,
+                            use_sim_time=args.use_sim_time and not on_rclpy,
                             include_hidden=args.include_hidden_topics,
                             discovery=not args.no_discovery)
+        if args.use_sim_time and on_rclpy:     # /clock through an rclpy subscription
+            from roszen.rclpy_backend.record import RclpySimStamp
+            recorder.sim = RclpySimStamp(node, writer.write)
         try:
             recorder.spin(stop)
         finally:

@@ -58,6 +58,19 @@ class PolledGraph:
             n.get_topic_names_and_types()
         return [SimpleNamespace(name=name, ros_type=t) for name, types in pairs for t in types]
 
+    # `node info`: rclpy's per-node queries, [(name, [types])]
+    def get_subscriber_names_and_types_by_node(self, name: str, ns: str) -> list:
+        return self._node._rnode.get_subscriber_names_and_types_by_node(name, ns)
+
+    def get_publisher_names_and_types_by_node(self, name: str, ns: str) -> list:
+        return self._node._rnode.get_publisher_names_and_types_by_node(name, ns)
+
+    def get_service_names_and_types_by_node(self, name: str, ns: str) -> list:
+        return self._node._rnode.get_service_names_and_types_by_node(name, ns)
+
+    def get_client_names_and_types_by_node(self, name: str, ns: str) -> list:
+        return self._node._rnode.get_client_names_and_types_by_node(name, ns)
+
     # the Recorder registers a change listener; none come here (it looks again periodically)
     def add_listener(self, cb: Any) -> None:
         pass
