@@ -86,3 +86,16 @@ def test_launch_runtime_argument(monkeypatch):
     assert [s.name for s in out] == ["sim_node", "recorder"]
     assert out[1].argv[1:] == ["-m", "roszen.rclpy_backend.record", "-a", "--use-sim-time",
                                "-o", "bag"]
+
+
+def test_verbs_pick_the_runtime_in_one_line(monkeypatch):
+    """The verbs' helper node follows ASTROBEE_RUNTIME: a bad value, or rclpy where it is not
+    installed, is one line (CliError) before anything joins a graph."""
+    from roszen.cli.common import CliError, make_node
+    monkeypatch.setenv("ASTROBEE_RUNTIME", "ros1")
+    with pytest.raises(CliError, match=r"^ASTROBEE_RUNTIME='ros1': expected one of"):
+        make_node()
+    if not rclpy_installed():
+        monkeypatch.setenv("ASTROBEE_RUNTIME", "rclpy")
+        with pytest.raises(CliError, match="rclpy is not importable here"):
+            make_node()

@@ -143,8 +143,16 @@ def make_node(prefix: str = "_roszen_cli", name: str | None = None):
     except ValueError as exc:
         raise CliError(str(exc)) from None
     if on_rclpy:
-        from roszen.rclpy_backend.cli import make_node as rclpy_node
-        return rclpy_node(name or f"{prefix}_{os.getpid()}")
+        try:
+            import rclpy.node  # noqa: F401 - rclpy itself, before anything is built on it
+            from roszen.rclpy_backend.cli import make_node as rclpy_node
+        except ImportError as exc:
+            raise CliError(f"ASTROBEE_RUNTIME=rclpy but rclpy is not importable here ({exc}); "
+                           "make install-rclpy, or source a ROS 2 Jazzy install") from None
+        try:
+            return rclpy_node(name or f"{prefix}_{os.getpid()}")
+        except Exception as exc:  # rcl cannot start (bad domain id, RMW missing, ...)
+            raise CliError(f"cannot join the ROS graph: {exc}".replace("\n", " ")) from None
     from roszen.node import Node
     from roszen.zconfig import ConfigError
     try:
