@@ -2,6 +2,7 @@
 
     python bench/oracle_fly.py [--cases 5:0 10:0 5:1] [--nodes 300] [--feedback lqr|pd]
                                [--pair fem|physical] [--swing] [--replan S] [--trace-dir DIR]
+    python bench/oracle_fly.py --baseline --cases 2.5:0 5:0     # the project's PD alone
 
 Each case MAGNITUDE:SEED is solved by the oracle (Node 2 -> JEM, nominal, the study's bump of
 that seed) on the pair model `--pair` (fem: the identified parameters of
@@ -32,6 +33,8 @@ def main() -> None:
     ap.add_argument("--pair", default="fem", choices=["fem", "physical"])
     ap.add_argument("--swing", action="store_true", help="the LQR weights the bag's swing too (SWING_SCALE)")
     ap.add_argument("--replan", type=float, default=0.0, help="s between replans from the measured state (0: none)")
+    ap.add_argument("--baseline", action="store_true",
+                    help="fly the project's PD alone on each case instead (same Flight, no oracle)")
     ap.add_argument("--trace-dir", default="", help="save each flight's per-tick trace (npz) here")
     ap.add_argument("--out", default="studies/results/oracle/flown_tracked.csv")
     a = ap.parse_args()
@@ -39,6 +42,9 @@ def main() -> None:
     leg = so.plan_leg("node2_to_jem_bag")
     for case in a.cases:
         mag, seed = float(case.split(":")[0]), int(case.split(":")[1])
+        if a.baseline:
+            print(case, baseline(seed, mag, a.nodes), flush=True)
+            continue
         b = so.bump_of_seed(seed, mag)
         t0 = time.perf_counter()
         r = so.solve(leg, params, b)
@@ -62,6 +68,18 @@ def main() -> None:
             if new:
                 w.writeheader()
             w.writerow(row)
+
+
+def baseline(seed: int, magnitude: float, nodes: int) -> dict:
+    """The project's PD alone on the case (truth state, the seed's bump, the verdict's budget)."""
+    from astrobee_lab.flight import Flight
+    realism = {"disturbances": [{"target": "bag", "magnitude": magnitude, "duration": 0.2,
+                                 "t_min": 10.0, "t_max": 30.0}]}
+    with Flight("node2_to_jem_bag", seed=seed, controller="pd", bag_model="fem",
+                bag_resolution=nodes, state_source="truth", realism=realism) as fl:
+        r = fl.run()
+    keys = ("final_position_error", "final_attitude_error", "min_bag_clearance", "time_to_rest")
+    return {"success": r.success, "cause": r.cause, **{k: r.metrics.get(k) for k in keys}}
 
 
 if __name__ == "__main__":
