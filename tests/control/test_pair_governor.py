@@ -76,6 +76,8 @@ def test_registered():
     ({"grasp": [0.0, 1.0]}, "grasp must be three finite numbers"),
     ({"w_torque": "x"}, "w_torque must be a finite number >= 0"),
     ({"hold_on_start": 2}, "hold_on_start must be true or false"),
+    ({"momentum": 1.5}, "momentum must be in [0, 1]"),
+    ({"route_error": -0.1}, "route_error must be a finite number >= 0"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
