@@ -24,7 +24,8 @@ attitude not settled within plan + 30 s; no contacts). Defaults on those 6 (dev 
 excursion 0.33-0.53 rad instead of ~3.14) or, w_torque 1, 1-1.7 m off the route; momentum 1
 with the `centre` inertia: 0/2. Held out, seeds 12-19: PD 4/8, defaults 3/8 (the misses
 closer: final attitude 0.41-0.56 rad against PD's 1.07-2.40, or |w| 0.03-0.13 rad/s at the
-budget's end); no contacts either. On the reduced pair model (pair_model 'fem', 10 N, 6 m
+budget's end); no contacts either. All of 0-19: PD 10/20, defaults 8/20 (only PD: 6 10 17,
+only pair_gov: 0; McNemar exact p = 0.625). On the reduced pair model (pair_model 'fem', 10 N, 6 m
 straight leg, seeds 0-11): PD 0/12, defaults 10/12 (brake_share 0.45: 11/12). Not better than
 PD on the FEM bag at 5 N: the pair model's success does not carry over.
 """
