@@ -35,7 +35,7 @@ test: $(STAMP)
 
 # three legs in one graph (cargo_transport.DEMO_LEGS): no bag (PD); the FEM bag (fast solver,
 # strap grasp) with a 5 N bump on the bag, flown by PD, then the same seed and bump flown by the
-# predictive controller over the wrench (wmpc, robot queen); runs/<t>/: summary.json, one plot
+# governed pair law (pair_gov, robot queen); runs/<t>/: summary.json, one plot
 # and one MP4 per leg, video_compare.mp4 (the two carries side by side)
 demo: $(STAMP)
 	$(VENV)/bin/astrobee launch cargo_transport --demo
@@ -46,8 +46,8 @@ bench: $(STAMP)
 # the controller study: PD vs MPC-A vs MPC-B carrying the FEM bag with the realism knobs on
 # (studies/controller_study.yaml, 90 flights on every core; resumes where it stopped):
 # runs/study_controller_study/ results.csv, report.md, plots/. The pair-control study (PD, the
-# sampling MPC, the pair law, wmpc and its ablations, 20 paired seeds, the oracle as the bound;
-# ~8 h on 2 cores): astrobee study run studies/pair_control_study.yaml -j 2
+# sampling MPC, the pair law, wmpc, pair_gov and its ablations, 20 paired seeds, the oracle as
+# the bound; 1200 flights, ~8 h on 2 cores): astrobee study run studies/pair_control_study.yaml -j 2
 study: $(STAMP)
 	$(PY) bench/controller_study.py --full
 

@@ -12,7 +12,7 @@ def nodes(tmp_path, **args):
     return {s.name: s for s in cargo_transport.generate_nodes(ctx)}
 
 
-def test_demo_flies_the_fem_bag_with_pd_then_wmpc_with_the_same_bump(tmp_path):
+def test_demo_flies_the_fem_bag_with_pd_then_pair_gov_with_the_same_bump(tmp_path):
     legs = [Scenario.load(n) for n in cargo_transport.DEMO_LEGS]
     carrying = [s for s in legs if s.bag is not None]
     assert len(carrying) == 2 and all(s.bag.model == "fem" and s.bag.solver == "fast" for s in carrying)
@@ -21,12 +21,12 @@ def test_demo_flies_the_fem_bag_with_pd_then_wmpc_with_the_same_bump(tmp_path):
     assert carrying[0].realism.disturbances[0].target == "bag"
     assert list(cargo_transport.DEMO_COMPARE) == [s.name for s in carrying]
     specs = nodes(tmp_path, demo="true")
-    # the default robot's PD flies the first two legs, queen's wmpc (its own namespace) the third
-    assert "pd_controller_node" in specs and "queen/wmpc_controller_node" in specs
-    assert specs["queen/wmpc_controller_node"].namespace == "queen"
+    # the default robot's PD flies the first two legs, queen's pair_gov (its own namespace) the third
+    assert "pd_controller_node" in specs and "queen/pair_gov_controller_node" in specs
+    assert specs["queen/pair_gov_controller_node"].namespace == "queen"
     mission = specs["mission"].command
     assert [mission[i + 1] for i, a in enumerate(mission) if a == "--scenario"] == list(cargo_transport.DEMO_LEGS)
-    # the PD leg may fail (that is what the demo shows): the wmpc leg is flown all the same
+    # the PD leg may fail (that is what the demo shows): the pair_gov leg is flown all the same
     assert "--keep-going" in mission
     assert "--keep-going" not in nodes(tmp_path, scenario="node2_to_jem")["mission"].command
 

@@ -21,14 +21,14 @@ its share of the bag's mass. video (true | false:
 render one MP4 per leg into the run folder, default: with demo), demo (true: fly DEMO_LEGS
 in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag_bump (the
 FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) with PD, then
-node2_to_jem_fem_bag_wmpc: the same carry, seed and bump flown by the predictive controller over
-the wrench; video_compare.mp4 shows the two carries side by side).
+node2_to_jem_fem_bag_pair_gov: the same carry, seed and bump flown by the governed pair law;
+video_compare.mp4 shows the two carries side by side).
 
 Controllers: each robot gets the controller its scenario names (`controller:` in the scenario
 file, pd when it names none; an explicit controller:= argument applies to every robot). A
 per-robot controller, rather than a second graph run or a switch inside one controller node,
-keeps the demo one graph, one recording, one summary.json: the wmpc leg's robot (queen) has its
-own wmpc_controller_node in /queen, while the PD node of the default robot waits on topics no
+keeps the demo one graph, one recording, one summary.json: the pair_gov leg's robot (queen) has
+its own pair_gov_controller_node in /queen, while the PD node of the default robot waits on topics no
 sim publishes during that leg, as every Astrobee runs its own controller.
 The mission client's exit ends the launch; post_run re-plots the flight from the closed bag.
 With the mission running, the controller's death does not end the launch by itself: the sim's
@@ -53,10 +53,10 @@ from astrobee_control import registry
 
 
 # no bag (PD); the FEM bag on the strap grasp with a 5 N bump on the bag drawn from the seed,
-# flown by PD and then, the same seed and bump, by the predictive controller over the wrench
-DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_wmpc")
+# flown by PD and then, the same seed and bump, by the governed pair law (pair_gov)
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_pair_gov")
 # the same carry by two controllers, side by side in video_compare.mp4 (render_demo_compare)
-DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_wmpc")
+DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_pair_gov")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
 SAFETY_DEFAULT = "true"
@@ -81,7 +81,7 @@ ARGUMENTS = {
                "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
     "demo": ("false", "fly DEMO_LEGS (no bag; the FEM bag with a 5 N bump by PD, then by "
-                      "wmpc: the same seed, the same bump), the sim reset between"),
+                      "pair_gov: the same seed, the same bump), the sim reset between"),
     "bag_model": ("", f"scenario override: {' | '.join(BAG_MODELS + (NO_BAG,))}"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
@@ -276,7 +276,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         if handover:
             args += ["--handover"] + (["--await-recorder"] if ctx.flag("record", True) else [])
-        if demo:                        # the PD leg is there to fail where wmpc does not
+        if demo:                        # the PD leg is there to fail where pair_gov does not
             args += ["--keep-going"]
         nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
                               command=["run", "astrobee_bringup", "mission", *args],
