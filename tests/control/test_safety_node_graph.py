@@ -8,11 +8,12 @@ import pytest
 from astrobee import flight_modes
 from astrobee import msgconv as mc
 from astrobee_control import safety_filter_node as sfn
+from astrobee_control.node_io import SAFETY
 
 
 def test_topic_names():
     assert sfn.COMMAND_NOMINAL == "gnc/ctl/command_nominal"
-    assert sfn.SAFETY == "gnc/ctl/safety"
+    assert SAFETY == "gnc/ctl/safety"
     assert mc.COMMAND == "gnc/ctl/command"
 
 
@@ -59,7 +60,7 @@ def test_full_thrust_at_a_wall_is_stopped_through_the_graph(router_env, body_axi
                                                             mc.vec(m.wrench.force), m.control_mode)),
                                  50)
         node.create_subscription(
-            "diagnostic_msgs/msg/DiagnosticArray", "/" + sfn.SAFETY,
+            "diagnostic_msgs/msg/DiagnosticArray", "/" + SAFETY,
             lambda m: diags.append((m.status[0].level, {kv.key: kv.value for kv in m.status[0].values})),
             roszen.LATCHED)
 
