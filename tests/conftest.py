@@ -1,9 +1,16 @@
 """Shared fixtures: a router subprocess on a free port and the env for node processes."""
 from __future__ import annotations
 
+import signal
 
 import pytest
 
+# A shell without job control starts background jobs with SIGINT ignored, and an ignored signal
+# stays ignored across exec: the node and verb processes the tests spawn (and stop with SIGINT,
+# as a user's Ctrl-C) would then never see it. The test session restores the default handler so
+# its children start with SIGINT delivered, however the suite itself was launched.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session")
