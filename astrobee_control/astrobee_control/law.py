@@ -21,8 +21,8 @@ Contract (times in seconds of sim time; frames as in pd.py):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, Protocol, runtime_checkable
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -106,3 +106,15 @@ class ControlLaw(Protocol):
 # a law's factory: (flight mode, robot mass properties, its parameters, complete) -> the law;
 # ValueError with one line for a bad parameter
 LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]
+
+
+def config_parameters(config: Any) -> dict[str, Any]:
+    """A law's ROS parameters from its config dataclass's defaults (tuples as lists: the
+    parameter types take lists); the config stays the one owner of the defaults."""
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()}
+
+
+def check_hold_on_start(params: dict) -> None:
+    """hold_on_start, every tracking law's switch: a bool, else one line of ValueError."""
+    if not isinstance(params.get("hold_on_start", True), bool):
+        raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")

@@ -32,7 +32,7 @@ PD on the FEM bag at 5 N: the pair model's success does not carry over.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -40,7 +40,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
-from .law import BagObservation, Step
+from .law import BagObservation, Step, check_hold_on_start, config_parameters
 from .mass import MassProperties
 from .pd import MODE_NOMINAL, Output, Reference, State
 from .registry import Controller
@@ -305,16 +305,13 @@ class GovLaw(Tracker):
         return self._step(self.pd.step(state, ref, dt), ref, MODE_NOMINAL)
 
 
-_CFG = asdict(GovConfig())
-PARAMETERS = {**{k: (list(v) if isinstance(v, tuple) else v) for k, v in _CFG.items()},
-              "hold_on_start": True}
+PARAMETERS = {**config_parameters(GovConfig()), "hold_on_start": True}
 
 
 def check_params(params: dict) -> None:
     """The law's parameters (complete), checked without building it (one-line errors)."""
     GovConfig.from_params(params)
-    if not isinstance(params.get("hold_on_start", True), bool):
-        raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")
+    check_hold_on_start(params)
 
 
 def make_gov_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> GovLaw:

@@ -27,7 +27,7 @@ state machine (tracking.Tracker): segment, stop, hold, results behave as with PD
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
-from .law import BagObservation
+from .law import BagObservation, check_hold_on_start, config_parameters
 from .mass import MassProperties, box_inertia
 from .pd import Output, Reference, State
 from .registry import Controller
@@ -267,17 +267,14 @@ class PairLaw(Tracker):
         self.pd.observe(bag, robot)
 
 
-_CFG = asdict(PairConfig())
 # the pair law's parameters beyond every controller's (name -> default; one owner: PairConfig)
-PARAMETERS = {**{k: (list(v) if isinstance(v, tuple) else v) for k, v in _CFG.items()},
-              "hold_on_start": True}
+PARAMETERS = {**config_parameters(PairConfig()), "hold_on_start": True}
 
 
 def check_params(params: dict) -> None:
     """The pair law's parameters (complete), checked without building it (one-line errors)."""
     PairConfig.from_params(params)
-    if not isinstance(params.get("hold_on_start", True), bool):
-        raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")
+    check_hold_on_start(params)
 
 
 def make_pair_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> PairLaw:

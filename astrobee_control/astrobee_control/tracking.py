@@ -20,7 +20,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from astrobee.msgconv import MotionState
 
-from .law import BagObservation, Step, carried_mass
+from .law import BagObservation, Step, carried_mass, check_hold_on_start
 from .mass import MassProperties
 from .pd import MODE_IDLE, MODE_NOMINAL, MODE_STOP, Output, PdFeedback, Reference, State
 from .reference import SampledTrajectory
@@ -173,8 +173,7 @@ def check_settle_time(value: Any) -> float:
 def check_params(params: dict) -> None:
     """The PD law's parameters (complete), checked without building it."""
     check_settle_time(params["settle_time"])
-    if not isinstance(params["hold_on_start"], bool):
-        raise ValueError(f"hold_on_start must be true or false, got {params['hold_on_start']!r}")
+    check_hold_on_start(params)
 
 
 def make_law(flight_mode: FlightMode, mass: MassProperties, params: dict) -> PdLaw:

@@ -27,13 +27,13 @@ takes a few ms (bench/pair_control_bench.py) where a sampler needs hundreds of r
 """
 from __future__ import annotations
 
-from dataclasses import asdict
 
 import numpy as np
 
 from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
+from .law import config_parameters
 from . import pair_linear as pl
 from .mass import MassProperties
 from .pair_law import PARAMETERS as PAIR_PARAMETERS
@@ -218,11 +218,9 @@ def _exp_batch(v: np.ndarray) -> np.ndarray:
     return _exp_so3(np.asarray(v, float))
 
 
-_CFG = asdict(WrenchMpcConfig())
 # the wrench MPC's parameters beyond every controller's (name -> default): its own (one owner:
 # WrenchMpcConfig) and the pair law's (the tracking law between decisions)
-PARAMETERS = {**PAIR_PARAMETERS,
-              **{k: (list(v) if isinstance(v, tuple) else v) for k, v in _CFG.items()}}
+PARAMETERS = {**PAIR_PARAMETERS, **config_parameters(WrenchMpcConfig())}
 
 
 def check_params(params: dict) -> None:
