@@ -54,7 +54,7 @@ from .pd import State
 from .reference import from_control_states
 
 JUMP_DISTANCE = 0.5  # m between two state samples: a reset, not motion
-CLOCK_HEARTBEAT = 1.5  # wall s: a paused sim's /clock comes once a second (sim_node)
+CLOCK_HEARTBEAT = 1.5  # wall s: a paused sim's /clock comes every 0.5 s (sim_loop.PAUSED_CLOCK_PERIOD)
 
 # parameters every controller node declares (name -> default)
 COMMON_PARAMETERS: dict[str, Any] = {
@@ -234,7 +234,7 @@ class ControllerNode(ControllerOutputs):
 
     def _stalled(self, who: str) -> None:
         """States stopped, their publisher still there. The sim's /clock still coming (a paused
-        lockstep sim sends one a wall second; a sim flying other robots, one a tick) is a
+        lockstep sim sends one every 0.5 wall s; a sim flying other robots, one a tick) is a
         deliberate pause: said at INFO; no /clock either is a hang: WARN, once."""
         last = self._last_clock_wall
         if last is not None and last > self._last_state_wall and \

@@ -4,12 +4,16 @@ realtime: paced to the wall clock (callbacks served while waiting; far behind, i
 catch up). fast: no pacing. lockstep: before each tick the loop waits for every commanded robot's
 answer to the last state (at most `lockstep_timeout` s of wall time, `lockstep_start_timeout` at
 the first tick; on timeout it logs and steps on). Paused (start_paused, /sim/control PAUSE, or
-a RESUME budget spent) it only serves callbacks and, for a paused start, /clock once a second.
+a RESUME budget spent) it only serves callbacks and, in a run that starts paused, publishes
+/clock every PAUSED_CLOCK_PERIOD wall s (the controllers' sign of a deliberate pause: their
+stall check comes after 1 s; a pause mid-run sends its first one that period after pausing).
 """
 from __future__ import annotations
 
 import time
 from typing import Any
+
+PAUSED_CLOCK_PERIOD = 0.5   # wall s between the /clock messages of a paused sim (start_paused)
 
 
 class TickLoop:
@@ -42,7 +46,13 @@ class TickLoop:
             self.paused, self.pause_at_tick = True, None
 
     def pause(self) -> None:
+        self._paused_now()
+
+    def _paused_now(self) -> None:
+        """Pause mid-run; the paused /clock starts a period from now (a short pause between
+        two RESUME chunks sends none)."""
         self.paused, self.pause_at_tick = True, None
+        self._last_clock = time.monotonic()
 
     def resume(self, steps: int) -> float | None:
         """Run on; with steps > 0 until that many more physics steps are done (rounded up to a
@@ -136,14 +146,14 @@ class TickLoop:
                 return
             self.drain(0.0)
             if self.paused:
-                if self.start_paused and time.monotonic() - self._last_clock >= 1.0:
+                if self.start_paused and time.monotonic() - self._last_clock >= PAUSED_CLOCK_PERIOD:
                     self._last_clock = time.monotonic()      # sim time for late nodes and
                     host.state.publish_clock()                # the recorder (no state)
                 self.drain(0.05)
                 continue
             self.run_tick()
             if self.pause_at_tick is not None and self.tick >= self.pause_at_tick:
-                self.paused, self.pause_at_tick = True, None
+                self._paused_now()
             if self.clock_mode == "realtime":
                 ahead = (sim.time - self._sim0) - (time.monotonic() - self._wall0)
                 while ahead > 0:           # serve callbacks while waiting for the wall clock

@@ -31,7 +31,7 @@ reset sim time restarts at 0, so answers to pre-reset states land there; a reset
 the lockstep command stamps, and a command counts for the current tick at most.
 
 Deterministic lockstep (`start_paused:=true`, set by the launch when the mission runs in
-lockstep): the sim starts paused and publishes no state (only /clock, once a second of wall)
+lockstep): the sim starts paused and publishes no state (only /clock, every 0.5 s of wall)
 until a client resets it; a reset leaves it paused with the state of t=0 published once; the
 state is never republished while waiting for commands (every subscriber was there before the
 first tick). /sim/control RESUME with `steps` > 0 runs until that many physics steps are done

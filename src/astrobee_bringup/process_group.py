@@ -203,7 +203,7 @@ class Launcher:
         self._checked = True
         if any(s.kind == "router" for s in self.specs) and port_open(self.port):
             ours = {"/" + s.name.strip("/") for s in self.specs if s.kind not in ("router", "recorder")}
-            clash = sorted(ours & running_nodes(self.port))
+            clash = sorted(running_nodes(self.port, ours))
             if clash:
                 raise LaunchError(f"the graph on port {self.port} already runs {', '.join(clash)} "
                                   f"(another launch?): give this one its own --port (or ROS_DOMAIN_ID)")
@@ -366,15 +366,23 @@ def _killpg(proc: subprocess.Popen, sig: int) -> None:
         pass
 
 
-def running_nodes(port: int, timeout: float = 3.0) -> set[str]:
-    """Fully qualified names of the nodes in the graph of the router on `port` (the graph
-    cache's first liveliness query answers with every token already there)."""
+def running_nodes(port: int, names: set[str], timeout: float = 3.0, settle: float = 2.0) -> set[str]:
+    """Which of the fully qualified node `names` the graph of the router on `port` runs. The
+    graph cache's first liveliness query answers with every token already there (bounded by
+    `timeout`); when none of `names` is in it, tokens still on their way get `settle` s more
+    (a loaded machine; paid only when a router already listens on the port)."""
     import roszen
     from roszen.testing import zenoh_env
     env = zenoh_env(port, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
     ctx = roszen.Context(env=env)
+
+    def seen() -> set[str]:
+        return names & {(ns.rstrip("/") + "/" + name)
+                        for name, ns in ctx.graph.get_node_names_and_namespaces()}
     try:
         ctx.graph.wait_ready(timeout)
-        return {(ns.rstrip("/") + "/" + name) for name, ns in ctx.graph.get_node_names_and_namespaces()}
+        if not seen():
+            ctx.graph.wait_for(lambda: bool(seen()), settle)
+        return seen()
     finally:
         ctx.shutdown()

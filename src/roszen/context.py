@@ -26,6 +26,8 @@ class Context:
                  args: Optional[Sequence[str]] = None) -> None:
         self.domain_id = env_domain_id(env) if domain_id is None else int(domain_id)
         self.args = list(args) if args else []
+        from .sigint import install_guard
+        install_guard()      # Ctrl-C is never swallowed by a zenoh callback (as rclpy.init)
         self.session = zenoh.open(session_config(env))
         self.zid = str(self.session.zid()).lower()
         self.router_connected = self._wait_for_router(env)

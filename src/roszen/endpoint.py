@@ -10,6 +10,7 @@ import zenoh
 from . import wire
 from .executor import _pending_interrupts
 from .qos import QoSProfile
+from .sigint import zenoh_callback
 
 if TYPE_CHECKING:
     from .node import Node
@@ -64,6 +65,7 @@ def _reraise_on_main(exc: BaseException) -> None:
 
 def _guarded(fn: Callable) -> Callable:
     """`fn` for a zenoh callback that may run on the main thread: Ctrl-C is re-delivered, not lost."""
+    @zenoh_callback
     def run(*a):
         try:
             fn(*a)

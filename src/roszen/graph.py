@@ -8,6 +8,7 @@ from typing import Callable, Optional
 
 import zenoh
 
+from .sigint import zenoh_callback
 from .wire import ADMIN_SPACE, CLIENT, NODE, PUB, SERVICE, SUB, parse_token
 
 
@@ -30,6 +31,7 @@ class GraphCache:
         lv.get(key, zenoh.handlers.Callback(self._on_reply, self._ready.set, indirect=False), timeout=3.0)
 
     # -- updates ----------------------------------------------------------------------------
+    @zenoh_callback
     def _on_sample(self, sample: "zenoh.Sample") -> None:
         token = str(sample.key_expr)
         if sample.kind == zenoh.SampleKind.DELETE:
@@ -37,6 +39,7 @@ class GraphCache:
         else:
             self.add(token)
 
+    @zenoh_callback
     def _on_reply(self, reply: "zenoh.Reply") -> None:
         if reply.ok is not None:
             self.add(str(reply.ok.key_expr))

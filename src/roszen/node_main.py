@@ -4,7 +4,6 @@ from __future__ import annotations
 import os
 import signal
 import sys
-import threading
 from typing import Any, Callable
 
 
@@ -51,24 +50,6 @@ def run(factory: Callable[[list[str]], Any], argv: list[str] | None = None,
 
 
 def _install_sigint():
-    """Make SIGINT a deferred KeyboardInterrupt (the previous handler, or None off the main thread).
-
-    The default handler raises wherever the main thread is, and that can be inside a zenoh
-    callback run on it (a same-session delivery during a put): zenoh prints "callback error ...
-    KeyboardInterrupt", swallows it and the node keeps running. Here the first SIGINT is queued
-    (roszen.executor.request_interrupt) and raised at the next executor step or publish, on the
-    main thread outside zenoh; a second SIGINT raises at once."""
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    from .executor import request_interrupt
-    count = [0]
-
-    def handler(signum, frame):  # noqa: ARG001
-        count[0] += 1
-        if count[0] > 1:
-            raise KeyboardInterrupt
-        request_interrupt()
-    try:
-        return signal.signal(signal.SIGINT, handler)
-    except ValueError:
-        return None
+    """Make SIGINT a deferred KeyboardInterrupt (see roszen.sigint); the previous handler."""
+    from .sigint import install_deferred
+    return install_deferred()

@@ -11,6 +11,7 @@ from . import codec, wire
 from .endpoint import _Endpoint
 from .executor import _pending_interrupts, raise_pending
 from .qos import QoSProfile
+from .sigint import zenoh_callback
 
 if TYPE_CHECKING:
     from .node import Node
@@ -43,6 +44,7 @@ class Publisher(_Endpoint):
         self._cls, self._serialize, self._put = sup.cls, sup.serialize, zpub.put
         self._attachment = wire.attachment_maker(self.gid)
 
+    @zenoh_callback      # a SIGINT inside its put is raised after the put, not lost
     def publish(self, msg: Any) -> None:
         """Serialise and send; bytes are sent as an already serialised CDR payload."""
         if type(msg) is self._cls:

@@ -10,6 +10,7 @@ import zenoh
 from . import codec, wire
 from .endpoint import _arity, _callback, _Endpoint, _Entity, _max_bytes_default, _reraise_on_main
 from .qos import QoSProfile
+from .sigint import zenoh_callback
 
 if TYPE_CHECKING:
     from .node import Node
@@ -32,6 +33,7 @@ class Service(_Entity, _Endpoint):
         self._advertise(node.context.session.declare_queryable(self.key_expr, _callback(self._on_query),
                                                               complete=True))
 
+    @zenoh_callback
     def _on_query(self, query: "zenoh.Query") -> None:  # zenoh thread (the caller's, for a local client)
         try:
             payload = query.payload

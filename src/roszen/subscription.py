@@ -11,6 +11,7 @@ import zenoh.ext as zext
 from . import codec, wire
 from .endpoint import _callback, _Endpoint, _Entity, _max_bytes_default, _reraise_on_main
 from .qos import QoSProfile
+from .sigint import zenoh_callback
 
 if TYPE_CHECKING:
     from .node import Node
@@ -60,6 +61,7 @@ class Subscription(_Entity, _Endpoint):
         if not self._scheduled:
             self.node._executor.schedule(self)
 
+    @zenoh_callback
     def _on_sample_direct(self, sample: "zenoh.Sample") -> None:  # zenoh thread (/clock only)
         try:
             if len(sample.payload) > self.max_bytes:

@@ -203,12 +203,6 @@ def test_program_ending_without_destroy_node_exits(router_env):
 
 
 @pytest.mark.graph
-@pytest.mark.xfail(strict=False, reason=(
-    "known race: with Python's default SIGINT handler a signal that arrives while the main "
-    "thread is inside zenoh's put is raised at the callback's entry (its RESUME check), before "
-    "the guard's try, and zenoh swallows it; 2 of the last 3 fresh-clone runs lost it. Programs "
-    "started by node_main defer SIGINT and are not affected; the fix is to install that handler "
-    "when the context starts, as rclpy.init does"))
 def test_sigint_in_a_callback_run_by_zenoh_on_the_main_thread_is_not_swallowed(router_env):
     p = spawn(python_cmd(PEER, "sigint_direct"), router_env)
     try:
