@@ -9,7 +9,8 @@ The FEM bag on the fast solver (the default) and on Bullet's (the reference), sa
 Table 2: the whole graph as `astrobee launch cargo_transport` starts it (router,
 sim_node in lockstep, planner, the PD or MPC controller process, mission; no recorder) flying
 Node 2 -> JEM with the FEM bag: the mission's real-time factor over the 44 s flight. Bullet's
-solver in the same run as the reference. And K=64 batched copies of the fast FEM bag + robot
+solver in the same run as the reference; the pair laws (pair_gov, wmpc) on the demo's carry
+(strap grasp, a 5 N bump on the bag) beside PD on the same flight. And K=64 batched copies of the fast FEM bag + robot
 (fem_rollout) in bag-seconds per wall second.
 Reference: pyastrobee 0.6x real time at 379 FEM nodes (FACTS.md section 6).
 Targets: >= 3x at ~400 nodes (goal 10x), >= 1x at ~1500 nodes, >= 50x for the reduced
@@ -17,6 +18,7 @@ models, MPC in the loop with the FEM bag >= 1x.
 
     .venv/bin/python bench/sim_rtf.py            # --quick (default): a few simulated seconds
     .venv/bin/python bench/sim_rtf.py --full     # longer runs, the 1500-node graph row
+    .venv/bin/python bench/sim_rtf.py --graph-only   # only Table 2 (whole graph, per controller)
     .venv/bin/python bench/sim_rtf.py --node-fast 5   # rigid/constraint through sim_node, fast
                                                       # clock, with and without a recorder
 """
@@ -40,10 +42,17 @@ TARGET_FEM_1500 = 1.0
 # (Bullet's FEM bag then)
 ROUND1 = {("fem", 400, "bullet"): (1.1, 0.8), ("constraint", 0, ""): (32.9, 11.8),
           ("composite", 0, ""): (4.0, 3.6), ("rigid", 0, ""): (36.7, 13.5)}
-# the graph rows: (controller, FEM nodes, solver, target); --full adds the 1500-node ones
-GRAPH = [("pd", 400, "fast", "3x (goal 10x)"), ("pd", 400, "bullet", "reference"),
-         ("mpc", 400, "fast", "1x")]
-GRAPH_FULL = [("pd", 1500, "fast", "1x"), ("pd", 1500, "bullet", "reference")]
+# the graph rows: (controller, FEM nodes, solver, target, scenario); --full adds the 1500-node
+# ones. BUMP: the demo's carry (strap grasp, a 5 N bump on the bag from the seed) for the pair
+# laws beside PD on the same flight
+BUMP = "node2_to_jem_fem_bag_bump"
+GRAPH = [("pd", 400, "fast", "3x (goal 10x)", "node2_to_jem_bag"),
+         ("pd", 400, "bullet", "reference", "node2_to_jem_bag"),
+         ("mpc", 400, "fast", "1x", "node2_to_jem_bag"),
+         ("pd", 400, "fast", "reference", BUMP), ("pair_gov", 400, "fast", "1x", BUMP),
+         ("wmpc", 400, "fast", "1x", BUMP)]
+GRAPH_FULL = [("pd", 1500, "fast", "1x", "node2_to_jem_bag"),
+              ("pd", 1500, "bullet", "reference", "node2_to_jem_bag")]
 
 
 def pd_wrench(pos, q, v, w, goal, q_goal):
@@ -242,9 +251,10 @@ def _start_recorded(node, proc, timeout: float = 60.0) -> bool:
     return True
 
 
-def graph_rtf(controller: str, res: int, solver: str, timeout: float = 900.0) -> tuple[float, str]:
-    """The whole cargo_transport graph (lockstep, no recorder) flying node2_to_jem with the FEM
-    bag: (the mission's real-time factor over the flight, its verdict)."""
+def graph_rtf(controller: str, res: int, solver: str, scenario: str = "node2_to_jem_bag",
+              timeout: float = 900.0) -> tuple[float, str]:
+    """The whole cargo_transport graph (lockstep, no recorder) flying `scenario` (Node 2 ->
+    JEM) with the FEM bag: (the mission's real-time factor over the flight, its verdict)."""
     import json
     import subprocess
     import sys
@@ -253,7 +263,7 @@ def graph_rtf(controller: str, res: int, solver: str, timeout: float = 900.0) ->
     with tempfile.TemporaryDirectory(prefix="sim_rtf_graph_") as run:
         cmd = [sys.executable, "-m", "astrobee_bringup.cli", "launch", "cargo_transport",
                "--port", str(testing.free_port()), "--run-dir", run,
-               "scenario:=node2_to_jem_bag", "bag_model:=fem", f"bag_resolution:={res}",
+               f"scenario:={scenario}", "bag_model:=fem", f"bag_resolution:={res}",
                f"fem_solver:={solver}", f"controller:={controller}", "record:=false", "video:=false"]
         try:
             subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=timeout)
@@ -313,6 +323,7 @@ def main() -> None:
     ap.add_argument("--full", action="store_true")
     ap.add_argument("--no-node", action="store_true", help="skip the sim_node (process) columns")
     ap.add_argument("--no-graph", action="store_true", help="skip the whole-graph rows")
+    ap.add_argument("--graph-only", action="store_true", help="only the whole-graph rows")
     ap.add_argument("--node-fast", type=int, default=0, metavar="RUNS",
                     help="only the reduced models through sim_node in fast clock mode, RUNS runs "
                          "each with and without a recorder")
@@ -323,7 +334,7 @@ def main() -> None:
     secs = {("fem", 400): 3.0, ("fem", 1500): 1.5}
     scale = 5.0 if a.full else 1.0
     rows = []
-    for model, res, solver in CASES:
+    for model, res, solver in ([] if a.graph_only else CASES):
         s = secs.get((model, res), 10.0) * scale
         if solver == "bullet" and res > 1000:
             s /= 3.0                                    # 0.3x real time: keep it short
@@ -332,31 +343,37 @@ def main() -> None:
         fast_wall, fast_cpu = ((float("nan"),) * 2 if a.no_node
                                else node_rtf(model, res, s, "fast", fem_solver=solver))
         rows.append((model, nodes, solver, s, lib_wall, lib_cpu, nd_wall, nd_cpu, fast_wall, fast_cpu))
-    print("\nsim real-time factor while a PD law drags the bag (350 Hz physics, 62.5 Hz ticks)")
-    print("wall = elapsed time on this (shared, 2-core) machine; cpu = per CPU-second of the sim "
-          "process (the 'one core' figure); sim_node = lockstep with this process as the controller "
-          "over the wire (includes the round trip per tick); fast = sim_node in fast clock mode "
-          "(no waiting), same controller")
-    print(f"{'model':<11}{'nodes':>6}{'solver':>7}{'sim s':>6}{'Simulation wall':>16}{'cpu':>7}"
-          f"{'lockstep wall':>14}{'cpu':>7}{'fast wall':>10}{'cpu':>7}{'target':>8}"
-          f"{'round 1 (lib/lockstep)':>24}  reference (pyastrobee)")
-    for (model, nodes, solver, s, lw, lc, nw, nc, fw, fc), case in zip(rows, CASES):
-        ref = "0.6x at 379 nodes" if model == "fem" else "-"
-        r1 = ROUND1.get(case, (float("nan"),) * 2)
-        target = TARGET_FEM_1500 if model == "fem" and nodes > 1000 else TARGET[model]
-        target_s = f"{target:.0f}x" if solver != "bullet" else "ref"
-        print(f"{model:<11}{nodes or '-':>6}{solver or '-':>7}{s:>6.1f}{lw:>15.1f}x{lc:>6.1f}x"
-              f"{nw:>13.1f}x{nc:>6.1f}x{fw:>9.1f}x{fc:>6.1f}x{target_s:>8}"
-              f"{r1[0]:>16.1f}x /{r1[1]:>5.1f}x  {ref}")
+    if rows:
+        print("\nsim real-time factor while a PD law drags the bag (350 Hz physics, 62.5 Hz ticks)")
+        print("wall = elapsed time on this (shared, 2-core) machine; cpu = per CPU-second of the sim "
+              "process (the 'one core' figure); sim_node = lockstep with this process as the controller "
+              "over the wire (includes the round trip per tick); fast = sim_node in fast clock mode "
+              "(no waiting), same controller")
+        print(f"{'model':<11}{'nodes':>6}{'solver':>7}{'sim s':>6}{'Simulation wall':>16}{'cpu':>7}"
+              f"{'lockstep wall':>14}{'cpu':>7}{'fast wall':>10}{'cpu':>7}{'target':>8}"
+              f"{'round 1 (lib/lockstep)':>24}  reference (pyastrobee)")
+        for (model, nodes, solver, s, lw, lc, nw, nc, fw, fc), case in zip(rows, CASES):
+            ref = "0.6x at 379 nodes" if model == "fem" else "-"
+            r1 = ROUND1.get(case, (float("nan"),) * 2)
+            target = TARGET_FEM_1500 if model == "fem" and nodes > 1000 else TARGET[model]
+            target_s = f"{target:.0f}x" if solver != "bullet" else "ref"
+            print(f"{model:<11}{nodes or '-':>6}{solver or '-':>7}{s:>6.1f}{lw:>15.1f}x{lc:>6.1f}x"
+                  f"{nw:>13.1f}x{nc:>6.1f}x{fw:>9.1f}x{fc:>6.1f}x{target_s:>8}"
+                  f"{r1[0]:>16.1f}x /{r1[1]:>5.1f}x  {ref}")
     if a.no_graph:
         return
-    graph = [(c, r, sv, tg, *graph_rtf(c, r, sv)) for c, r, sv, tg in GRAPH + (GRAPH_FULL if a.full else [])]
-    k64, n64 = batched_rtf(400, 64, 0.15 * scale)
+    graph = [(c, r, sv, tg, sc, *graph_rtf(c, r, sv, sc))
+             for c, r, sv, tg, sc in GRAPH + (GRAPH_FULL if a.full else [])]
     print("\nthe whole graph (astrobee launch cargo_transport, lockstep, no recorder) flying "
-          "Node 2 -> JEM (44 s) with the FEM bag: the mission's real-time factor")
-    print(f"{'controller':<11}{'nodes':>6}{'solver':>8}{'real time':>11}  {'target':<16}verdict")
-    for c, r, sv, tg, rtf, why in graph:
-        print(f"{c:<11}{r:>6}{sv:>8}{rtf:>10.1f}x  {tg:<16}{why}")
+          "Node 2 -> JEM (44 s) with the FEM bag: the mission's real-time factor; "
+          f"{BUMP}: the strap grasp and a 5 N bump on the bag (the demo's carry)")
+    print(f"{'controller':<11}{'nodes':>6}{'solver':>8}{'real time':>11}  {'target':<16}"
+          f"{'scenario':<27}verdict")
+    for c, r, sv, tg, sc, rtf, why in graph:
+        print(f"{c:<11}{r:>6}{sv:>8}{rtf:>10.1f}x  {tg:<16}{sc:<27}{why}")
+    if a.graph_only:
+        return
+    k64, n64 = batched_rtf(400, 64, 0.15 * scale)
     print(f"\nbatched fast FEM bag, K=64 copies + robot, {n64} nodes: {k64:.1f} bag-s per wall s "
           f"(rollouts; Bullet: one process per copy)")
 
