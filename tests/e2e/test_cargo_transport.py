@@ -279,6 +279,27 @@ def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
     assert any(m.ns == "chosen" for arr in cands for m in arr.markers)
 
 
+@pytest.mark.parametrize("controller", ["pair_gov", "wmpc"])
+def test_pair_aware_controller_flies_a_leg(tmp_path, config_dir, launches, controller):
+    """The pair-aware laws of the controller registry (the governed pair law; the predictive
+    controller over the wrench) fly a short leg carrying the constraint bag through the whole
+    graph (controller:=<name>); wmpc publishes its predicted trajectory (nav_msgs/Path)."""
+    run = tmp_path / "run"
+    launch = Launch(run, config_dir, "scenario:=short_hop", f"controller:={controller}",
+                    "bag_model:=constraint")
+    launches.append(launch)
+    code = launch.wait(timeout=300.0)
+    assert code == 0, "\n".join(launch.lines[-40:])
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["success"], summary["reason"]
+    assert summary["contacts"] == 0 and summary["carrying_bag"]
+    assert any(f"{controller}_controller_node" in ln for ln in launch.lines)
+    if controller == "wmpc":
+        paths = mcap_messages(run / "bag").get("/gnc/ctl/predicted_path", [])
+        assert paths and all(p.header.frame_id == "world" for p in paths)
+        assert max(len(p.poses) for p in paths) > 5
+
+
 def test_safety_filter_in_the_loop_is_transparent(tmp_path, config_dir, launches):
     """safety:=true puts the CBF filter between the controller and the sim, inside the
     controller's process: the nominal flight is unchanged (goal reached, no contact) and the
