@@ -261,11 +261,11 @@ def test_bad_override_starts_nothing(tmp_path, config_dir):
     assert not run.exists()
 
 
-def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
-    """mpc_controller_node (the sampling MPC on controller_node) flies a short leg carrying the
-    constraint bag through the whole graph, and publishes what it considered."""
+def carry_short_hop(tmp_path, config_dir, launches, controller: str):
+    """The whole graph flies short_hop carrying the constraint bag with `controller`: success,
+    no contact (the run folder and the launch)."""
     run = tmp_path / "run"
-    launch = Launch(run, config_dir, "scenario:=short_hop", "controller:=mpc",
+    launch = Launch(run, config_dir, "scenario:=short_hop", f"controller:={controller}",
                     "bag_model:=constraint")
     launches.append(launch)
     code = launch.wait(timeout=300.0)
@@ -273,6 +273,13 @@ def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
     summary = json.loads((run / "summary.json").read_text())
     assert summary["success"], summary["reason"]
     assert summary["contacts"] == 0 and summary["carrying_bag"]
+    return run, launch
+
+
+def test_mpc_controller_flies_a_leg(tmp_path, config_dir, launches):
+    """mpc_controller_node (the sampling MPC on controller_node) flies a short leg carrying the
+    constraint bag through the whole graph, and publishes what it considered."""
+    run, _ = carry_short_hop(tmp_path, config_dir, launches, "mpc")
     msgs = mcap_messages(run / "bag")
     cands = msgs.get("/gnc/ctl/candidates", [])
     assert cands, "no candidates published"
@@ -284,15 +291,7 @@ def test_pair_aware_controller_flies_a_leg(tmp_path, config_dir, launches, contr
     """The pair-aware laws of the controller registry (the governed pair law; the predictive
     controller over the wrench) fly a short leg carrying the constraint bag through the whole
     graph (controller:=<name>); wmpc publishes its predicted trajectory (nav_msgs/Path)."""
-    run = tmp_path / "run"
-    launch = Launch(run, config_dir, "scenario:=short_hop", f"controller:={controller}",
-                    "bag_model:=constraint")
-    launches.append(launch)
-    code = launch.wait(timeout=300.0)
-    assert code == 0, "\n".join(launch.lines[-40:])
-    summary = json.loads((run / "summary.json").read_text())
-    assert summary["success"], summary["reason"]
-    assert summary["contacts"] == 0 and summary["carrying_bag"]
+    run, launch = carry_short_hop(tmp_path, config_dir, launches, controller)
     assert any(f"{controller}_controller_node" in ln for ln in launch.lines)
     if controller == "wmpc":
         paths = mcap_messages(run / "bag").get("/gnc/ctl/predicted_path", [])
