@@ -52,6 +52,23 @@ def test_the_study_expands_to_the_grid_with_stable_keys(tmp_path):
         [f.key for f in s.flights]
 
 
+def test_a_settle_budget_reaches_the_flights_task_and_leaves_other_keys_alone(tmp_path):
+    """settle_budget (a flight key) is the Task's time after the plan's end; flights that do
+    not set it keep their keys (a study gains a long-settle block without re-flying the rest)."""
+    from astrobee_lab.study.spec import task_keywords
+    plain = load_study(write(tmp_path, SMALL))
+    longer = dict(SMALL, blocks=[{"name": "plain", "grid": {"controller": ["pd"]}},
+                                 {"name": "long", "set": {"settle_budget": 90},
+                                  "grid": {"controller": ["pd"]}}])
+    longer.pop("grid")
+    s = load_study(write(tmp_path, longer, "long.yaml"))
+    by_block = {b: [f for f in s.flights if f.block == b] for b in ("plain", "long")}
+    assert [f.key for f in by_block["plain"]] == [f.key for f in plain.flights if f.label == "pd"]
+    assert {f.key for f in by_block["long"]}.isdisjoint(f.key for f in plain.flights)
+    assert [task_keywords(f.spec) for f in by_block["long"]] == [{"settle_budget": 90.0}] * 2
+    assert [task_keywords(f.spec) for f in by_block["plain"]] == [{}, {}]
+
+
 def test_serial_and_pool_give_the_same_table(tmp_path):
     path = write(tmp_path, SMALL)
     a = run_study(path, tmp_path / "serial", workers=1, progress=False)
@@ -138,6 +155,7 @@ BAD = [
     ({"base": {"controller": "pd"}, "grid": {"realism.disturbances.0.magnitude": [5]}},
      "is not in the list"),
     ({"seeds": -1, "grid": {"controller": ["pd"]}}, "seeds must be"),
+    ({"base": {"settle_budget": -5}, "grid": {"controller": ["pd"]}}, "settle_budget must be > 0 s"),
     ({"grid": {"controller": ["pd"]}, "random": {"count": 2, "draw": {"bag_mass": {"normal": 1}}}},
      "uniform"),
 ]

@@ -26,7 +26,7 @@ from typing import Any
 
 import yaml
 
-from .spec import StudyError, build_scenario, load_study
+from .spec import StudyError, build_scenario, load_study, task_keywords
 
 # metric -> (absolute tolerance, relative tolerance): |graph - row| <= abs + rel * |row|
 TOLERANCES = {
@@ -112,7 +112,7 @@ def judge_recording(spec: dict, leg: dict, bag: Path) -> dict | None:
     from ..recorded import judge_bag
     sc = build_scenario(spec)
     pd = leg.get("plan_duration")
-    kw = {"time_limit": spec["time_limit"]} if spec.get("time_limit") else {}
+    kw = task_keywords(spec)
     task = Task.from_scenario(sc, plan_duration=float(pd) if pd else None, **kw)
     m = judge_bag(bag, task)
     ok, cause = m.verdict()

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from .spec import OVERRIDES, FlightSpec, Study, StudyError, build_scenario, load_study
+from .spec import OVERRIDES, FlightSpec, Study, StudyError, build_scenario, load_study, task_keywords
 
 # columns of the table that measure the machine, not the flight (differ run to run)
 COST_COLUMNS = ("wall_time", "real_time_factor", "compute_ms_median", "compute_ms_p99",
@@ -43,7 +43,7 @@ def fly(spec: dict) -> dict:
     record: dict[str, Any] = {"spec": spec, "host": socket.gethostname(), "pid": os.getpid()}
     try:
         scenario = build_scenario(spec)
-        task = {"time_limit": spec["time_limit"]} if spec.get("time_limit") else None
+        task = task_keywords(spec) or None
         with Flight(scenario, seed=int(spec["seed"]), controller=spec["controller"],
                     safety=bool(spec["safety"]), controller_params=spec["params"],
                     state_source=spec.get("state_source", "ekf"), task=task) as f:

@@ -25,8 +25,9 @@ difficult}`): conditions that differ in several parameters, shown by name in the
 Blocks may share a name (their rows are reported together). Without `blocks`, a top-level `grid` / `random` / `set` is the one block. Flight parameters:
 scenario (a name of config/scenarios or an inline scenario mapping), controller (a label),
 safety, bag_model, bag_variant, bag_resolution, bag_mass, fem_solver, flight_mode, realism (a
-preset name or a mapping of knobs), state_source, time_limit, params (controller parameters
-over the label's), and dotted paths into the mappings (`realism.<knob>`, `params.<name>`,
+preset name or a mapping of knobs), state_source, time_limit, settle_budget (s after the plan's
+end to be at rest at the goal; the Task's 30 s else), params (controller parameters over the
+label's), and dotted paths into the mappings (`realism.<knob>`, `params.<name>`,
 `realism.disturbances.0.magnitude`). Every flight is keyed by a stable hash of what is flown
 (the controller's definition, not its label), so a flight that two blocks share runs once.
 Bad files raise StudyError with one line naming the file and the problem.
@@ -53,7 +54,8 @@ BLOCK_KEYS = {"name", "set", "grid", "random", "seeds", "description"}
 # the scenario overrides a flight may set (astrobee.overrides; realism is kept apart in a spec)
 OVERRIDES = tuple(k for k in OVERRIDE_KEYS if k not in ("realism", "robots"))
 FLIGHT_KEYS = {"scenario", "controller", "safety", *OVERRIDES, "realism", "state_source",
-               "time_limit", "params"}
+               "time_limit", "settle_budget", "params"}
+TASK_KEYS = ("time_limit", "settle_budget")     # a flight's Task keywords (sim s)
 DOTTED_ROOTS = {"realism", "params", "scenario"}
 DISTRIBUTIONS = ("uniform", "loguniform", "choice", "randint")
 MAX_FLIGHTS = 100000
@@ -279,12 +281,19 @@ def resolve_flight(values: dict, controllers: dict[str, dict], where: str) -> tu
     spec: dict[str, Any] = {"scenario": scenario, "controller": kind, "params": params,
                             "safety": safety, "realism": realism, "state_source": state_source,
                             "overrides": {k: values[k] for k in OVERRIDES if values.get(k) is not None}}
-    tl = values.get("time_limit")
-    if tl is not None:
-        if isinstance(tl, bool) or not isinstance(tl, (int, float)) or not tl > 0:
-            raise StudyError(f"{where}: time_limit must be > 0 s, got {tl!r}")
-        spec["time_limit"] = float(tl)
+    for key in TASK_KEYS:          # only when given: the keys of flights without them stay
+        tl = values.get(key)
+        if tl is not None:
+            if isinstance(tl, bool) or not isinstance(tl, (int, float)) or not tl > 0:
+                raise StudyError(f"{where}: {key} must be > 0 s, got {tl!r}")
+            spec[key] = float(tl)
     return _plain(spec), label
+
+
+def task_keywords(spec: dict) -> dict[str, float]:
+    """The Task keywords a flight spec sets (time_limit, settle_budget): for Flight and for
+    judging its recording alike."""
+    return {k: spec[k] for k in TASK_KEYS if spec.get(k)}
 
 
 def build_scenario(spec: dict):
