@@ -31,6 +31,8 @@ SUMMARY = (
     ("time_to_rest", "time to rest s (median of those at rest)", "median", "{:.1f}"),
     ("max_attitude_excursion", "largest attitude excursion rad (median / max)", "med_max",
      "{:.2f} / {:.2f}"),
+    ("final_attitude_error", "final attitude error rad (median / max)", "med_max",
+     "{:.2f} / {:.2f}"),
     ("peak_bag_robot_speed", "peak bag-robot speed m/s (median)", "median", "{:.3f}"),
     ("rms_position_error", "RMS tracking error mm (median)", "median_mm", "{:.1f}"),
     ("compute_ms_median", "compute per cycle ms (median / p99)", "med_p99", "{:.2f} / {:.1f}"),
@@ -42,6 +44,7 @@ CONTINUOUS = (
     ("min_bag_clearance", "min bag clearance m", 1.0, "{:+.3f}"),
     ("time_to_rest", "time to rest s", 1.0, "{:+.1f}"),
     ("max_attitude_excursion", "attitude excursion rad", 1.0, "{:+.2f}"),
+    ("final_attitude_error", "final attitude error rad", 1.0, "{:+.2f}"),
     ("rms_position_error", "RMS error mm", 1e3, "{:+.1f}"),
     ("compute_ms_median", "compute ms", 1.0, "{:+.2f}"),
 )
