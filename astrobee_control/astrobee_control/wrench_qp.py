@@ -103,6 +103,34 @@ def select_boxes(boxes: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.argmax(depth, axis=1)
 
 
+def junction_boxes(boxes: np.ndarray) -> np.ndarray:
+    """The keep-in boxes (B, 6) and every convex box inside the union of two of them: their
+    common cross-section across one axis, the union of their extents along it (valid where
+    those extents overlap or touch); a body passing a hatch from one module to the next stays
+    inside one of these, not inside either module's box."""
+    out = [boxes]
+    i, j = np.triu_indices(len(boxes), 1)
+    a, b = boxes[i], boxes[j]
+    inter_lo, inter_hi = np.maximum(a[:, :3], b[:, :3]), np.minimum(a[:, 3:], b[:, 3:])
+    for ax in range(3):
+        m = np.concatenate([inter_lo, inter_hi], axis=1)
+        m[:, ax] = np.minimum(a[:, ax], b[:, ax])
+        m[:, 3 + ax] = np.maximum(a[:, 3 + ax], b[:, 3 + ax])
+        ok = np.all(inter_hi - inter_lo >= -1e-9, axis=1)
+        out.append(m[ok])
+    return np.unique(np.concatenate(out), axis=0)
+
+
+def corridor(boxes: np.ndarray, points: np.ndarray, shrink: np.ndarray | float) -> np.ndarray:
+    """For each point (K, 3), the box of `boxes` (junction_boxes' output) the body centred there
+    sits deepest in once the box is shrunk by `shrink` (m, scalar or per axis): (K, 6), shrunk."""
+    sh = np.broadcast_to(np.asarray(shrink, float), (3,))
+    lo, hi = boxes[None, :, :3] + sh, boxes[None, :, 3:] - sh
+    depth = np.minimum(points[:, None, :] - lo, hi - points[:, None, :]).min(-1)   # (K, C)
+    k = np.argmax(depth, axis=1)
+    return np.concatenate([lo[0, k], hi[0, k]], axis=1)
+
+
 class WrenchMpc:
     """The QP (module docstring) over a PairFigures model; `decide` returns a Plan."""
 
@@ -112,6 +140,7 @@ class WrenchMpc:
         self.config = config.validate()
         self.limits = np.asarray(limits, float)            # (6,) body wrench limits
         self.boxes = np.asarray(cfg.keep_in_boxes() if keep_in is None else keep_in, float)
+        self._junctions: tuple[np.ndarray, np.ndarray] | None = None   # (boxes, their junctions)
         self._warm: tuple[float, np.ndarray] | None = None  # (time, z) of the last solution
 
     def decide(self, now: float, x0: np.ndarray, R0: np.ndarray, fig: pl.PairFigures,
@@ -192,17 +221,16 @@ class WrenchMpc:
         leq[:nx] = -Ad @ x0
         lu = np.tile(np.concatenate([-self.limits, [0.0 if c.retime else 1.0]]), N)
         uu = np.tile(np.concatenate([self.limits, [1.0]]), N)
-        box_r = self.boxes[select_boxes(self.boxes, robot_nom)]
-        box_b = self.boxes[select_boxes(self.boxes, bag_nom)]
-        sr = c.robot_half_size + c.margin
-        sb = np.asarray(bag_half, float) + c.margin
+        cands = self._corridor_boxes()
+        box_r = corridor(cands, robot_nom, c.robot_half_size + c.margin)
+        box_b = corridor(cands, bag_nom, np.asarray(bag_half, float) + c.margin)
         blocks, lo_parts, hi_parts = [], [], []
-        for C, off, box, shrink, E in ((Cr, cr, box_r, sr, Epos[0]), (Cb, cb, box_b, sb, Epos[1])):
+        for C, off, box, E in ((Cr, cr, box_r, Epos[0]), (Cb, cb, box_b, Epos[1])):
             G = sp.kron(I_N, sp.csc_matrix(C))                          # (3N, N nx)
             G = sp.hstack([G, sp.csc_matrix((3 * N, nz - N * nx))], format="csc")
             blocks += [G + E, G - E]
-            lo = (box[:, :3] + shrink - off).ravel()
-            hi = (box[:, 3:] - shrink - off).ravel()
+            lo = (box[:, :3] - off).ravel()
+            hi = (box[:, 3:] - off).ravel()
             lo_parts += [lo, np.full(3 * N, -np.inf)]
             hi_parts += [np.full(3 * N, np.inf), hi]
         # terminal rest (soft): |v_N|, |w_N| <= eps + e_term
@@ -244,6 +272,12 @@ class WrenchMpc:
         X[:, pl.V] = X[:, pl.V] @ R0.T
         return Plan(now + dt * np.arange(N + 1), X, U, R0, robot, bag,
                     float(np.max(z[ie:])), status)
+
+    def _corridor_boxes(self) -> np.ndarray:
+        """junction_boxes of the keep-in boxes, kept while the boxes are the same."""
+        if self._junctions is None or self._junctions[0] is not self.boxes:
+            self._junctions = (self.boxes, junction_boxes(self.boxes))
+        return self._junctions[1]
 
     def _static(self, Ad: np.ndarray, Bd: np.ndarray, N: int, nz: int, ks: np.ndarray) -> tuple:
         """The constraint blocks that change only with the model: dynamics, input boxes,

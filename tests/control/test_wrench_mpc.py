@@ -31,12 +31,12 @@ def nominal(T=6.0, L=2.0, drift=0.15):
                              np.tile(Q, (len(t), 1)), z, z)
 
 
-def planned(nom, boxes, params=None):
+def planned(nom, boxes, params=None, orientation=Q):
     law = make_wrench_mpc_law(flight_modes.get("nominal"), mp.robot(), params or {})
     law.mpc.boxes = boxes
-    st = State(np.zeros(3), np.zeros(3), Q, np.zeros(3))
-    bag = BagObservation(rot.rotate(Q, OFFSET), Q, np.zeros(3), np.zeros(3), True, 10.0, SIZE,
-                         "constraint")
+    st = State(np.zeros(3), np.zeros(3), orientation, np.zeros(3))
+    bag = BagObservation(rot.rotate(orientation, OFFSET), orientation, np.zeros(3), np.zeros(3),
+                         True, 10.0, SIZE, "constraint")
     law.update(st, 0.0, 0.016)
     law.observe_bag(bag, st)
     law.follow(nom, 0.0)
