@@ -165,6 +165,20 @@ class WrenchMpcLaw(PairLaw):
             half = np.abs(Rb) @ (np.asarray(self.pd.bag.size, float) / 2)
         return self.mpc.decide(now, x0, R, fig, nom, half)
 
+    def _feed_forward(self, plan: Plan, Rk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(acc, alpha) world, per knot: the accelerations of the pair's centre and attitude that
+        the plan's own wrench gives (M a = F, I alpha = tau - lever x F about the centre, the
+        pair law's allocation), so the pair law applies the planned wrench; not differences of
+        the predicted states (those blend adjacent steps and carry the model's lag and the
+        swing's reaction, which the law must not apply again)."""
+        pair = self.pd.pair()
+        n = len(Rk)
+        u = plan.u[np.minimum(np.arange(n), len(plan.u) - 1)]
+        F, tau = u[:, :3], u[:, 3:6]
+        a_body = F / pair.mass
+        al_body = np.linalg.solve(pair.inertia, (tau - np.cross(pair.lever, F)).T).T
+        return (np.einsum("kij,kj->ki", Rk, a_body), np.einsum("kij,kj->ki", Rk, al_body))
+
     def _executed(self, plan: Plan, now: float) -> SampledTrajectory:
         """The plan as the robot's reference (pose, rate, the planned accelerations as
         feed-forward), then the rest of the nominal shifted by the delay; ends at the goal."""
@@ -181,10 +195,17 @@ class WrenchMpcLaw(PairLaw):
         pos = X[k, 0:3] - arm
         vel = X[k, 3:6] - np.cross(wk, arm)
         dtp = float(t[1] - t[0])
-        acc = np.gradient(X[:, 3:6], dtp, axis=0)[k]
-        alpha = np.gradient(np.einsum("ij,kj->ki", plan.R0, X[:, 9:12]), dtp, axis=0)[k]
+        acc, alpha = self._feed_forward(plan, Rk)
         q = rot.from_matrix(Rk)
+        # each step's feed-forward held over the step (a knot just before the next one): the
+        # plan's wrench is piecewise constant, interpolating it would blend steps of opposite sign
         head = [t[k], pos, vel, acc, q, wk, alpha]
+        if end > 0:
+            eps = 1e-3 * dtp
+            pre = [t[1:end + 1] - eps, pos[1:] - vel[1:] * eps, vel[1:] - acc[:-1] * eps,
+                   acc[:-1], q[1:], wk[1:], alpha[:-1]]
+            order = np.argsort(np.concatenate([t[k], pre[0]]), kind="stable")
+            head = [np.concatenate([a, b])[order] for a, b in zip(head, pre)]
         if s[end] >= nom.end_time - 1e-3:
             if end + 1 - 0 <= 1 or t[end] - now < self.mpc.config.replan_period:
                 self._finishing = True
