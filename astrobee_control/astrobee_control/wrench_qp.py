@@ -208,7 +208,14 @@ class WrenchMpc:
         diag_term(kx[:, None] + 15 + ax3, 0.0, (c.w_swing_rate + end_w)[:, None] * np.ones(3))
         diag_term(ku + np.arange(N)[:, None] * nu + np.arange(6),
                   0.0, c.w_effort / self.limits ** 2)
-        diag_term(ksig, 1.0, c.w_progress)
+        # progress is wanted only until the nominal's end: past it sigma is 0 by s <= s_end,
+        # and paying (1 - sigma)^2 there spread the rest evenly over the horizon (sigma =
+        # remaining / horizon: an exponential approach that never arrived)
+        # (the linearisation's progress tells which steps start before the end; a small reward
+        # on every step's progress carries the plan on where that guess ended too early)
+        starts = np.concatenate([[s0], s_bar[:-1]])
+        diag_term(ksig, 1.0, c.w_progress * (starts < s_end - 1e-6))
+        q[ks] -= 0.1 * c.w_progress
         diag_term(np.arange(nz), 0.0, 1e-6)
         q[ie:] += c.w_slack
         r_, c_, v_ = (np.concatenate(x) for x in (rows, cols, vals))

@@ -95,3 +95,23 @@ def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
         registry.get("wmpc").check_params(params)
     assert words in str(err.value) and "\n" not in str(err.value)
+
+
+
+def test_progress_runs_at_full_rate_into_the_end():
+    # 2 s of the nominal left, a 6 s horizon: the plan reaches the end at the clock's rate and
+    # rests there (it used to spread the rest over the horizon, sigma = 2 / 6, and so approach
+    # the end exponentially without arriving)
+    nom = nominal(T=8.0, L=0.05, drift=0.0)
+    law = make_wrench_mpc_law(flight_modes.get("nominal"), mp.robot(), {})
+    law.mpc.boxes = np.array([[-5.0, -5.0, -5.0, 5.0, 5.0, 5.0]])
+    ref = nom.sample(6.0)
+    st = State(ref.position, ref.velocity, Q, np.zeros(3))
+    law.observe_bag(BagObservation(ref.position + rot.rotate(Q, OFFSET), Q, ref.velocity,
+                                   np.zeros(3), True, 10.0, SIZE, "constraint"), st)
+    law.nominal = nom                       # on the nominal's clock at t = 6 s
+    x0, fig = law.state_vector(st, 6.0)
+    assert x0[18] == pytest.approx(6.0)
+    plan = law.mpc.decide(6.0, x0, rot.to_matrix(Q), fig, nom, SIZE / 2)
+    assert plan.u[0, 6] > 0.8
+    assert plan.x[len(plan.t) // 2, 18] == pytest.approx(nom.end_time, abs=0.05)
