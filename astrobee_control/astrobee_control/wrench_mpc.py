@@ -7,18 +7,20 @@ pair_linear.py) chooses the body-wrench sequence over `horizon` seconds (`steps`
   min  sum_k  w_position |p_k - p_nom(s_k)|^2 + w_velocity |v_k - sigma_k v_nom|^2
               + w_attitude |delta_k - delta_nom|^2 + w_rate |w_k|^2
               + w_swing |phi_k|^2 + w_swing_rate |phi'_k|^2 + w_effort |u_k / limits|^2
-              + w_progress (1 - sigma_k)^2 + w_slack (corridor slacks)
+              + w_progress (1 - sigma_k)^2 (steps before the nominal's end) - 0.1 w_progress s_k
+              + w_slack (corridor slacks)
   s.t. the linear pair model (swing, propulsion lag), per-axis wrench limits, 0 <= sigma <= 1,
        s_k <= segment end; robot and bag centres in time-varying keep-in boxes (the box each
-       holds along the nominal, shrunk by the robot's half size / the bag's extent; soft: an
+       (or two abutting boxes merged at a hatch) holds along the nominal, shrunk by the robot's half
+       size / the bag's extent; soft: an
        L1 slack); when the horizon reaches the goal, a terminal set at rest (|v|, |w|, |phi'|
        small; soft).
 
 p is the pair's centre of mass, the nominal's moved by the known bag offset. The progress s
 runs on the nominal's clock at rate sigma: a disturbed flight slows, pauses or re-times
 instead of chasing the clock (no delay budget: the cost of progress trades it off). The
-chosen plan becomes the pair law's reference (predicted robot pose, with the planned
-acceleration as feed-forward) followed by the rest of the nominal shifted by the delay; the
+chosen plan becomes the pair law's reference (predicted robot pose, with the planned wrench as
+feed-forward, held over each step) followed by the rest of the nominal shifted by the delay; the
 pair law (pair_law.py) tracks it at 62.5 Hz between decisions. Warm start: the previous
 solution, shifted. Why a QP and not MPPI over wrench splines: the model is nearly linear at the
 speeds flown (0.2 m/s, attitude re-linearised every 0.2 s), the corridor and the limits are
