@@ -10,11 +10,10 @@ pair_linear.py) chooses the body-wrench sequence over `horizon` seconds (`steps`
               + w_progress (1 - sigma_k)^2 (steps before the nominal's end) - 0.1 w_progress s_k
               + w_slack (corridor slacks)
   s.t. the linear pair model (swing, propulsion lag), per-axis wrench limits, 0 <= sigma <= 1,
-       s_k <= segment end; robot and bag centres in time-varying keep-in boxes (the box each
-       (or two abutting boxes merged at a hatch) holds along the nominal, shrunk by the robot's half
-       size / the bag's extent; soft: an
-       L1 slack); when the horizon reaches the goal, a terminal set at rest (|v|, |w|, |phi'|
-       small; soft).
+       s_k <= segment end; robot and bag centres in time-varying keep-in boxes (the box, or
+       two abutting boxes merged at a hatch, each holds along the nominal, shrunk by the robot's
+       half size / the bag's extent; soft: an L1 slack); when the horizon reaches the goal, a
+       terminal set at rest (|v|, |w|, |phi'| small; soft).
 
 p is the pair's centre of mass, the nominal's moved by the known bag offset. The progress s
 runs on the nominal's clock at rate sigma: a disturbed flight slows, pauses or re-times
