@@ -230,6 +230,20 @@ def _made_up_rows(study) -> list[dict]:
     return rows
 
 
+def test_a_controller_failing_every_seed_is_plotted(tmp_path):
+    """0 of 3 at a point: Wilson's lower end is the rate up to rounding (-5.6e-17 below it),
+    which matplotlib refused as a negative error bar and the whole report failed."""
+    from astrobee_lab.study.report import write_report
+    from astrobee_lab.study.stats import wilson
+    assert 0.0 - wilson(0, 3)[0] < 0.0                    # the rounding this guards against
+    study = load_study(write(tmp_path, SWEPT))
+    rows = [dict(r, success=False) if r["label"] == "mpc_a" else r
+            for r in _made_up_rows(study)]
+    md = write_report(study, rows, tmp_path).read_text()
+    assert "| 2.0 | mpc_a | 3 | 0% (0/3) |" in md
+    assert list((tmp_path / "plots").glob("success_vs_*.png"))
+
+
 def test_the_report_states_intervals_pairs_and_is_one_html_page(tmp_path):
     from html.parser import HTMLParser
 

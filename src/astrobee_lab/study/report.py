@@ -242,7 +242,9 @@ def _plots(study_name: str, block: str, rows: list[dict], swept: list[str], out:
                 continue
             rate = [sum(by[x]) / len(by[x]) for x in xs]
             ci = [wilson(sum(by[x]), len(by[x])) for x in xs]
-            err = [[r - lo for r, (lo, _) in zip(rate, ci)], [hi - r for r, (_, hi) in zip(rate, ci)]]
+            # >= 0: at 0 or 20 of 20 the interval's end equals the rate up to rounding
+            err = [[max(r - lo, 0.0) for r, (lo, _) in zip(rate, ci)],
+                   [max(hi - r, 0.0) for r, (_, hi) in zip(rate, ci)]]
             shift = (i - (len(labels) - 1) / 2) * 0.012 * (max(xs) - min(xs) or 1.0)
             ax.errorbar([x + shift for x in xs], rate, yerr=err, fmt="o-", capsize=4,
                         label=f"{lab} ({len(by[xs[0]])} seeds a point)")
