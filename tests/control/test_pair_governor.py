@@ -54,6 +54,46 @@ def fly_reference(params: dict, turned: float) -> np.ndarray:
     return np.array(refs)
 
 
+OFFSET = np.array([-0.484, 0, -0.065])        # bag_at's robot -> bag centre (body frame)
+
+
+def centre_lever() -> np.ndarray:
+    """The robot -> pair centre of mass offset of bag_at (body frame)."""
+    m_r = float(mp.robot().mass)
+    return 10.0 / (m_r + 10.0) * OFFSET
+
+
+@pytest.mark.parametrize("track", ["robot", "centre"])
+def test_turning_about_the_centre_costs_the_centre_tracker_no_force(track):
+    """The pair turned 0.05 rad about its centre of mass, which sits where the reference's does:
+    tracking the centre asks no force (the position loop does not fight the turn); tracking
+    the robot asks M kp |c - R c| to drag the robot back."""
+    c = centre_lever()
+    q = rot.from_rotvec(np.array([0.0, 0.0, 0.05]))
+    st = State(c - rot.rotate(q, c), np.zeros(3), q, np.zeros(3))
+    law = make_gov_law(FM, mp.robot(), {"track": track})
+    law.observe_bag(bag_at(st), st)
+    out = law.pd.step(st, Reference(np.zeros(3), orientation=Q), 0.016)
+    M = float(mp.robot().mass) + 10.0
+    drag = M * FM.pos_kp * np.linalg.norm(c - rot.rotate(q, c))
+    if track == "centre":
+        np.testing.assert_allclose(out.force, 0.0, atol=1e-12)
+    else:
+        assert np.linalg.norm(out.force) == pytest.approx(drag, rel=1e-9)
+
+
+def test_centre_tracker_counts_the_forces_torque_about_the_centre():
+    """With the lever on, an unsaturated force F at the robot's centre comes with the body torque
+    c x F that cancels its turn of the pair about the observed centre of mass c (not about the
+    grasp's)."""
+    st = State(np.zeros(3), np.zeros(3), Q, np.zeros(3))
+    law = make_gov_law(FM, mp.robot(), {"track": "centre", "lever": True})
+    law.observe_bag(bag_at(st), st)
+    out = law.pd.step(st, Reference(np.array([0.0, 0.005, 0.005]), orientation=Q), 0.016)
+    assert np.linalg.norm(out.force) > 0.01
+    np.testing.assert_allclose(out.torque, np.cross(centre_lever(), out.force), atol=1e-9)
+
+
 def test_progress_pauses_while_the_pair_is_turned():
     calm, turned = fly_reference({"retime": True}, 0.0), fly_reference({"retime": True}, 0.6)
     clock = fly_reference({"retime": False}, 0.6)
@@ -78,6 +118,7 @@ def test_registered():
     ({"hold_on_start": 2}, "hold_on_start must be true or false"),
     ({"momentum": 1.5}, "momentum must be in [0, 1]"),
     ({"route_error": -0.1}, "route_error must be a finite number >= 0"),
+    ({"track": "bag"}, "track must be one of robot, centre"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
