@@ -38,7 +38,14 @@ the 0.033 N m pitch limit, so the pitch error grows to 1.5 rad before it comes b
 `track: centre, lever: true` (seeds 0-19, same setting): 8/20 (1 with contact), largest
 attitude excursion 0.13-0.49 rad (defaults: 7/20, up to pi); the misses now drift 0.3-2.2 m off
 the route while the force turns the pair. The grasp's lever with the centre tracked: 11/20 but
-7 with contact; w_torque 1: 5/14.
+7 with contact; w_torque 1: 5/14. In the pair-control study (`gov_centre`, 20 paired seeds):
+2.5 / 5 / 7.5 / 10 N 14 / 8 / 2 / 0 of 20 with 0 / 1 / 7 / 18 flights with contact (the force
+turning the pair drives it into the walls at the larger bumps); the clamp at 5 N 13/20 vs PD's
+7/20 (McNemar p 0.031). Through the CBF filter at 10 N (seeds 0-9): contacts 4/10, success 1/10.
+What is left after the bump is a bag resting at a new angle on its strap (the trace: its centre
+moved from (-0.48, 0, -0.07) to (-0.36, -0.03, -0.28) m in the body frame and stayed), so the
+force perpendicular to the new lever turns the pair and the robot's 0.033 N m lets it push the
+pair sideways with ~0.14 N at most without turning it.
 """
 from __future__ import annotations
 
