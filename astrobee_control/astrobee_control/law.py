@@ -108,6 +108,14 @@ class ControlLaw(Protocol):
 LawFactory = Callable[[FlightMode, MassProperties, dict], ControlLaw]
 
 
+def carried_reference(ref: Reference, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position, velocity) of the point at body offset c of the robot's reference (world
+    frame): where the pair's centre of mass is meant to be when the reference carries the bag."""
+    c_ref = rot.to_matrix(rot.normalize(ref.orientation)) @ np.asarray(c, float)
+    return (np.asarray(ref.position, float) + c_ref,
+            np.asarray(ref.velocity, float) + np.cross(np.asarray(ref.omega, float), c_ref))
+
+
 def config_parameters(config: Any) -> dict[str, Any]:
     """A law's ROS parameters from its config dataclass's defaults (tuples as lists: the
     parameter types take lists); the config stays the one owner of the defaults."""

@@ -58,7 +58,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
-from .law import BagObservation, Step, check_hold_on_start, config_parameters
+from .law import BagObservation, Step, carried_reference, check_hold_on_start, config_parameters
 from .mass import MassProperties
 from .pd import MODE_NOMINAL, Output, Reference, State
 from .registry import Controller
@@ -229,12 +229,10 @@ class GovController:
         robot's reference carrying the bag at its present body-frame offset; world frame)."""
         m_r, m_b = float(self.mass.mass), float(self.bag.mass)
         c = (m_b / (m_r + m_b)) * np.asarray(self._offset, float)
-        c_ref = rot.to_matrix(rot.normalize(ref.orientation)) @ c
-        e_p = np.asarray(ref.position, float) + c_ref - np.asarray(state.position, float) - R @ c
+        p_ref, v_ref = carried_reference(ref, c)
         v_c = (m_r * np.asarray(state.velocity, float)
                + m_b * np.asarray(self.bag.velocity, float)) / (m_r + m_b)
-        e_v = np.asarray(ref.velocity, float) + np.cross(np.asarray(ref.omega, float), c_ref) - v_c
-        return e_p, e_v
+        return p_ref - np.asarray(state.position, float) - R @ c, v_ref - v_c
 
     def observe(self, bag: BagObservation | None, robot: State | None) -> None:
         if bag is None or not bag.attached or robot is None or bag.mass <= 0:

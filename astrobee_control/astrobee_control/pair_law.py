@@ -35,7 +35,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
-from .law import BagObservation, check_hold_on_start, config_parameters
+from .law import BagObservation, carried_reference, check_hold_on_start, config_parameters
 from .mass import MassProperties, box_inertia
 from .pd import Output, Reference, State
 from .registry import Controller
@@ -177,10 +177,8 @@ class PairController:
         pair = self.pair()
         c = pair.centre if cfg.centre else np.zeros(3)
         # the pair's centre: measured from robot + bag, reference from the robot's plan
-        R_ref = rot.to_matrix(rot.normalize(ref.orientation))
         w_ref = np.asarray(ref.omega, float)
-        p_ref = np.asarray(ref.position, float) + R_ref @ c
-        v_ref = np.asarray(ref.velocity, float) + np.cross(w_ref, R_ref @ c)
+        p_ref, v_ref = carried_reference(ref, c)
         p, v = np.asarray(state.position, float), np.asarray(state.velocity, float)
         swing = np.zeros(3)
         if self.bag is not None and pair.bag_mass > 0:
