@@ -22,6 +22,8 @@ from .oracle_table import oracle_rows, oracle_setting
 from .oracle_table import load as load_oracle
 from .stats import paired, signed_rank, wilson
 
+MARKERS = "osD^v"   # success plots: a marker per group of 10 controllers (the colours cycle)
+
 # (column, header, how to aggregate, format)
 SUMMARY = (
     ("success", "success", "rate", "{:.0%}"),
@@ -246,8 +248,10 @@ def _plots(study_name: str, block: str, rows: list[dict], swept: list[str], out:
             err = [[max(r - lo, 0.0) for r, (lo, _) in zip(rate, ci)],
                    [max(hi - r, 0.0) for r, (_, hi) in zip(rate, ci)]]
             shift = (i - (len(labels) - 1) / 2) * 0.012 * (max(xs) - min(xs) or 1.0)
-            ax.errorbar([x + shift for x in xs], rate, yerr=err, fmt="o-", capsize=4,
-                        label=f"{lab} ({len(by[xs[0]])} seeds a point)")
+            # matplotlib cycles 10 colours: past them the line is dashed and the marker other
+            ax.errorbar([x + shift for x in xs], rate, yerr=err, color=f"C{i % 10}",
+                        fmt=MARKERS[i // 10 % len(MARKERS)] + ("-", "--")[i // 10 % 2],
+                        capsize=4, label=f"{lab} ({len(by[xs[0]])} seeds a point)")
         what = names.get(col, col)
         ax.set_xlabel(what)
         ax.set_ylabel("success rate (bars: Wilson 95% interval)")
