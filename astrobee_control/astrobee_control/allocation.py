@@ -86,6 +86,40 @@ def allocate(f_des: np.ndarray, tau_des: np.ndarray, lever: np.ndarray, f_lim: n
     return x[:3] * f_lim, x[3:] * t_lim
 
 
+def guard(f_des: np.ndarray, tau_des: np.ndarray, lever: np.ndarray, f_lim: np.ndarray,
+          t_lim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F, tau): the wanted force, its part across the lever cut back only as far as its
+    torque about the pair's centre (-c x F) would take from a wanted torque the body torque can
+    no longer meet; tau = tau_des + c x F, clipped. Unlike allocate, the force is never bent to
+    make torque (the route is not traded for attitude), it only stops opposing the attitude.
+
+    Per axis i the kept share s of the cross-lever force obeys |tau_des_i + s t_i| <=
+    max(t_lim_i, |tau_des_i|), t = c x F_perp the torque the robot must add to cancel it."""
+    f_lim, t_lim = np.asarray(f_lim, float), np.asarray(t_lim, float)
+    c = np.asarray(lever, float)
+    tau_des = np.asarray(tau_des, float)
+    F = np.clip(np.asarray(f_des, float), -f_lim, f_lim)
+    n = float(np.linalg.norm(c))
+    if n > 1e-9:
+        u = c / n
+        F_par = (F @ u) * u
+        t = np.cross(c, F - F_par)              # what tau must add to cancel the force's torque
+        s = 1.0
+        for i in range(3):
+            if t[i] == 0.0:
+                continue
+            bound = max(t_lim[i], abs(tau_des[i]))
+            # |tau_des_i + s t_i| <= bound, s in [0, 1]: the largest s (0 if tau_des_i is at it)
+            hi = (bound - tau_des[i]) / t[i] if t[i] > 0 else (-bound - tau_des[i]) / t[i]
+            s = min(s, max(0.0, hi))
+        F = F_par + s * (F - F_par)
+        # back into the box by a common factor: the force's torque shrinks with it, so every
+        # axis's bound still holds (the feasible torques form an interval around 0)
+        F = F * min(1.0, float(np.min(f_lim / np.maximum(np.abs(F), 1e-300))))
+    tau = np.clip(tau_des + np.cross(c, F), -t_lim, t_lim)
+    return F, tau
+
+
 def cost(F: np.ndarray, tau: np.ndarray, f_des: np.ndarray, tau_des: np.ndarray,
          lever: np.ndarray, f_lim: np.ndarray, t_lim: np.ndarray, w_force: float = 1.0,
          w_torque: float = 30.0) -> float:

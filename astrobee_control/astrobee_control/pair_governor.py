@@ -14,6 +14,9 @@ on the robot (the route through the hatch is the robot's) and changes three thin
 - allocation (`lever: true`): the force's torque through the grasp, lever (m_b / M) g, counts in
   allocation.allocate, torque weighted up with the attitude error, the force weight up with the
   route error (`route_error`); off by default (false = force treated as acting at the centre);
+- `lever_use: guard` (with `lever`): the force is never bent to make torque; its part across
+  the lever is cut only as far as its torque about the centre would take from a saturated
+  attitude torque (allocation.guard: the route stops fighting the turn, it does not help it);
 - the position loop's point (`track`): the robot's centre (default) or the pair's centre of
   mass (`centre`: the reference carries the bag at its observed body-frame offset, so turning the
   pair about its centre asks no force; with `lever` the allocation then counts the force's torque
@@ -42,6 +45,11 @@ the route while the force turns the pair. The grasp's lever with the centre trac
 2.5 / 5 / 7.5 / 10 N 14 / 8 / 2 / 0 of 20 with 0 / 1 / 7 / 18 flights with contact (the force
 turning the pair drives it into the walls at the larger bumps); the clamp at 5 N 13/20 vs PD's
 7/20 (McNemar p 0.031). Through the CBF filter at 10 N (seeds 0-9): contacts 4/10, success 1/10.
+The guard (`lever: true, lever_use: guard`, seeds 0-19 at 5 N, the study's setting, fifth
+session): centre-tracked 10/20 with 8 contact flights, robot-tracked 8/20 with 11 (PD 10/20, 0
+contacts); attitude excursion 0.23-1.2 rad, but with the cross-lever force cut while the
+attitude saturates the bump's momentum is not taken out and the pair drifts 0.66-1.16 m off
+the route into the walls: on this bag the route has to win over the attitude, not yield to it.
 What is left after the bump is a bag resting at a new angle on its strap (the trace: its centre
 moved from (-0.48, 0, -0.07) to (-0.36, -0.03, -0.28) m in the body frame and stayed), so the
 force perpendicular to the new lever turns the pair and the robot's 0.033 N m lets it push the
@@ -65,6 +73,7 @@ from .registry import Controller
 from .tracking import CONTROLLING, STOPPING, Tracker
 
 INERTIAS = ("robot", "pivot", "rigid", "centre")
+LEVER_USES = ("help", "guard")
 TRACKED = ("robot", "centre")
 
 
@@ -79,6 +88,9 @@ class GovConfig:
     inertia_scale: float = 1.0   # x that inertia (ablation: 0.8 / 1.2)
     brake_share: float = 0.6     # share of the torque limit the rate limit plans to brake with
     lever: bool = False          # the force's torque through the grasp counts in the allocation
+    lever_use: str = "help"      # with lever: "help" (the force may be bent to make torque,
+                                 # allocation.allocate) or "guard" (it only stops opposing a
+                                 # saturated attitude torque, allocation.guard)
     track: str = "robot"         # the position loop's point: the robot's centre, or the pair's
                                  # centre of mass ("centre": turning the pair about it costs no
                                  # force, so the position loop stops fighting the attitude loop)
@@ -108,6 +120,9 @@ class GovConfig:
             elif f.name == "inertia":
                 if v not in INERTIAS:
                     raise ValueError(f"inertia must be one of {', '.join(INERTIAS)}, got {v!r}")
+            elif f.name == "lever_use":
+                if v not in LEVER_USES:
+                    raise ValueError(f"lever_use must be one of {', '.join(LEVER_USES)}, got {v!r}")
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
@@ -273,8 +288,11 @@ class GovController:
             w_f = 1.0
             if cfg.route_error > 0:
                 w_f = max(1.0, float(np.linalg.norm(e_p)) / cfg.route_error)
-            force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
-                                                w_f, cfg.w_torque * share)
+            if cfg.lever and cfg.lever_use == "guard":
+                force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
+            else:
+                force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
+                                                    w_f, cfg.w_torque * share)
         else:
             force, torque = np.zeros(3), np.zeros(3)
         return Output(force=force, torque=torque, accel=R.T @ a_w, alpha=al_b,

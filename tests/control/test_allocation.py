@@ -69,3 +69,50 @@ def test_scipy_fallback_agrees():
         x = al.box_lsq(A, b)
         ref = lsq_linear(A, b, bounds=(-np.ones(6), np.ones(6)), method="bvls").x
         assert np.sum((A @ x - b) ** 2) <= np.sum((A @ ref - b) ** 2) + 1e-9
+
+
+def test_guard_unsaturated_is_exact():
+    """Nothing saturates: the guard leaves the wanted force whole and cancels its torque."""
+    f_des, tau_des = np.array([0.1, -0.05, 0.02]), np.array([0.001, -0.002, 0.003])
+    F, tau = al.guard(f_des, tau_des, LEVER, F_LIM, T_LIM)
+    np.testing.assert_allclose(F, f_des, atol=1e-12)
+    np.testing.assert_allclose(tau - np.cross(LEVER, F), tau_des, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_guard_never_opposes_a_saturated_attitude(seed):
+    """Wanted wrenches up to 3x the limits: on every axis whose wanted torque the body torque
+    cannot meet, the torque about the pair's centre (tau - c x F) is at least the limit in the
+    wanted direction (the force does not take from it); the kept share of the cross-lever force
+    is the largest such (brute force over the share); the along-lever part is never cut unless
+    the box asks; both within the limits."""
+    rng = np.random.default_rng(100 + seed)
+    f_des = rng.uniform(-3, 3, 3) * F_LIM
+    tau_des = rng.uniform(-3, 3, 3) * T_LIM
+    lever = LEVER + rng.normal(0, 0.05, 3)
+    F, tau = al.guard(f_des, tau_des, lever, F_LIM, T_LIM)
+    assert np.all(np.abs(F) <= F_LIM + 1e-12) and np.all(np.abs(tau) <= T_LIM + 1e-12)
+    about = tau - np.cross(lever, F)
+    sat = np.abs(tau_des) >= T_LIM
+    assert np.all(about[sat] * np.sign(tau_des[sat]) >= T_LIM[sat] - 1e-12)
+    # brute force: the largest share s of the clipped force's cross-lever part that keeps
+    # |tau_des + c x F(s)| within max(limit, |tau_des|) on every axis
+    Fc = np.clip(f_des, -F_LIM, F_LIM)
+    u = lever / np.linalg.norm(lever)
+    par = (Fc @ u) * u
+    bound = np.maximum(T_LIM, np.abs(tau_des))
+    shares = np.linspace(0.0, 1.0, 100001)
+    cand = par[None, :] + shares[:, None] * (Fc - par)[None, :]
+    ok = np.all(np.abs(tau_des[None, :] + np.cross(lever[None, :], cand)) <= bound + 1e-12, 1)
+    best = cand[np.flatnonzero(ok).max()]
+    best = best * min(1.0, float(np.min(F_LIM / np.maximum(np.abs(best), 1e-300))))
+    np.testing.assert_allclose(F, best, atol=2e-5 * F_LIM.max())
+
+
+def test_guard_does_not_bend_the_force_for_torque():
+    """A wanted pitch torque beyond the limit and no wanted force: where allocate tilts the
+    force to make torque (the route traded for attitude), the guard asks no force at all."""
+    tau_des = np.array([0.0, 2.0 * T_LIM[1], 0.0])
+    F, tau = al.guard(np.zeros(3), tau_des, LEVER, F_LIM, T_LIM)
+    np.testing.assert_allclose(F, 0.0, atol=1e-15)
+    assert tau[1] == pytest.approx(T_LIM[1])

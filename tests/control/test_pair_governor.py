@@ -94,6 +94,28 @@ def test_centre_tracker_counts_the_forces_torque_about_the_centre():
     np.testing.assert_allclose(out.torque, np.cross(centre_lever(), out.force), atol=1e-9)
 
 
+def test_guard_stops_the_route_from_fighting_the_turn():
+    """The position loop wants a force whose torque about the pair's centre opposes a saturated
+    attitude torque (the traced 5 N failure: pitch held at the limit while the position loop's
+    lever undid it): with lever_use guard the torque about the centre is the whole limit in
+    the wanted direction; without the lever the force takes from it."""
+    q = rot.from_rotvec(np.array([0.0, -0.8, 0.0]))       # pitched 0.8 rad off the reference
+    st = State(np.zeros(3), np.zeros(3), q, np.zeros(3))
+    ref = Reference(np.array([0.0, 0.0, 0.05]), orientation=Q)
+    c = centre_lever()
+    about = {}
+    for name, params in (("guard", {"track": "centre", "lever": True, "lever_use": "guard"}),
+                         ("plain", {"track": "centre"})):
+        law = make_gov_law(FM, mp.robot(), params)
+        law.observe_bag(bag_at(st), st)
+        out = law.pd.step(st, ref, 0.016)
+        assert abs(out.attitude_error[1]) > 0.5
+        want = np.sign(out.alpha[1])
+        about[name] = want * (out.torque[1] - np.cross(c, out.force)[1])
+    assert about["guard"] >= FM.max_torque[1] - 1e-12
+    assert about["plain"] < FM.max_torque[1] - 1e-3
+
+
 def test_progress_pauses_while_the_pair_is_turned():
     calm, turned = fly_reference({"retime": True}, 0.0), fly_reference({"retime": True}, 0.6)
     clock = fly_reference({"retime": False}, 0.6)
@@ -111,6 +133,7 @@ def test_registered():
     ({"inertia_scale": 0.0}, "inertia_scale must be > 0"),
     ({"brake_share": 1.5}, "brake_share must be in (0, 1]"),
     ({"lever": "yes"}, "lever must be true or false"),
+    ({"lever_use": "push"}, "lever_use must be one of help, guard"),
     ({"retime": 1}, "retime must be true or false"),
     ({"att_slow": 0.5, "att_stop": 0.4}, "att_slow (0.5) must be below att_stop (0.4)"),
     ({"grasp": [0.0, 1.0]}, "grasp must be three finite numbers"),
