@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import sys
 import threading
 import time
+from typing import Callable, Optional
 
 from roszen.bag.writer import BagWriter
 from roszen.qos import Durability, History, QoSProfile, Reliability
@@ -24,6 +26,14 @@ REDISCOVER_PERIOD = 1.0   # s between looks at the graph with no change event (a
 
 def log(text: str) -> None:
     print(f"[INFO] [{time.time():.9f}] [rosbag2_recorder]: {text}", file=sys.stderr, flush=True)
+
+
+def _say(text: str, timeout: float = 0.5) -> None:
+    """log() from a thread about to exit the process: bounded (the main thread may hold
+    stderr's lock, blocked in a write to a full pipe)."""
+    t = threading.Thread(target=log, args=(text,), name="recorder-say", daemon=True)
+    t.start()
+    t.join(timeout)
 
 
 def subscription_qos(offered: list[QoSProfile]) -> QoSProfile:
@@ -125,6 +135,59 @@ class SimStamp:
         self._sub.destroy()
 
 
+class StopSignals:
+    """SIGINT and SIGTERM for a recording process, served on a thread of their own.
+
+    A Python signal handler runs on the main thread, and only between bytecodes: while that
+    thread is inside a native call (zenoh's session close waits for a callback in flight, up
+    to its own 10 s timeout; an undeclare; a put) no handler runs, and a handler that does run
+    interrupts whatever frame is there (it must not wait on a lock that frame holds). A CI
+    launch so ended with "'recorder' ignored SIGINT and SIGTERM: SIGKILL" after a good flight.
+    Here the handlers do nothing; the signal number reaches `signal.set_wakeup_fd`'s pipe from
+    the C-level handler whatever the main thread is doing, and a daemon thread reading it acts:
+
+    - the first signal (SIGINT or SIGTERM) sets `stop`: the main thread ends the recording and
+      completes the bag (Recorder.spin / finish), the normal, clean path;
+    - any further one calls `on_second` (the recorder's stop_now: exit at once once the bag is
+      complete, completing it from another thread if the main thread has not; bounded).
+
+    Installed from the main thread for the rest of the process (its exit, where zenoh's
+    session is closed, is covered too)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self, on_second: Optional[Callable[[], None]] = None) -> None:
+        self.stop = threading.Event()
+        self.on_second = on_second or (lambda: os._exit(0))   # before a recorder exists
+        self.count = 0
+        self._r, w = os.pipe()
+        os.set_blocking(w, False)
+        signal.set_wakeup_fd(w, warn_on_full_buffer=False)     # from the main thread only
+        for sig in self.SIGNALS:
+            signal.signal(sig, _ignore)
+        threading.Thread(target=self._watch, name="stop-signals", daemon=True).start()
+
+    def _watch(self) -> None:
+        while True:
+            try:
+                data = os.read(self._r, 64)
+            except InterruptedError:
+                continue
+            if not data:
+                return
+            for signum in data:
+                if signum in self.SIGNALS:
+                    self.count += 1
+                    if self.count == 1:
+                        self.stop.set()
+                    else:
+                        self.on_second()
+
+
+def _ignore(signum: int, frame) -> None:  # noqa: ARG001 - served by StopSignals' thread
+    pass
+
+
 class Recorder:
     """Records `topics` (or all, minus hidden/excluded) of `node`'s graph into `writer`.
 
@@ -150,8 +213,10 @@ class Recorder:
         self.subscriptions: dict[str, object] = {}
         self.received = 0
         self.intake = True       # False once stopping: samples still arriving are not written
-        self.completed = False   # the bag is finished (footer, metadata.yaml): safe to exit
-        self.hurry = False       # a second stop signal came: exit as soon as the bag is complete
+        self._complete_lock = threading.Lock()
+        self._done = threading.Event()   # the bag is finished (or failed for good): safe to exit
+        self._meta = None
+        self._error: BaseException | None = None
         self._skipped: set[str] = set()
         self._probes: dict[str, dict] = {}     # topic -> {type: probe subscription} (several types)
         self._warned: set[str] = set()
@@ -310,30 +375,52 @@ class Recorder:
         while time.monotonic() < end and self.node.spin_once(timeout_sec=0):
             pass
 
-    def finish(self, grace: float = 2.0, exit_code: int = 0):
+    def complete(self):
+        """Finish the bag once (intake closed, what waits for a first /clock written, the writer's
+        queue written, MCAP summary and footer, metadata.yaml) and return its metadata; raises
+        BagError when a write failed. Any thread: the main thread's finish() or, after a second
+        stop signal, StopSignals' (whichever comes first does it, the other gets its result)."""
+        with self._complete_lock:
+            if not self._done.is_set():
+                self.intake = False
+                try:
+                    if self.sim is not None:
+                        self.sim.flush_pending()
+                    self._meta = self.writer.close()
+                except BaseException as exc:    # noqa: BLE001 - handed to every caller
+                    self._error = exc
+                finally:
+                    self._done.set()
+        if self._error is not None:
+            raise self._error
+        return self._meta
+
+    @property
+    def completed(self) -> bool:
+        """The bag is finished (footer, metadata.yaml) or failed for good: safe to exit."""
+        return self._done.is_set()
+
+    def exit_code(self) -> int:
+        return 1 if self.failed.is_set() or self._error is not None else 0
+
+    def finish(self, grace: float = 2.0, exit_code: int | None = None):
         """Stop recording and complete the bag, in an order that cannot lose its footer: the
         intake closes, the writer writes what it has and finishes the MCAP (summary, footer,
         metadata.yaml), and only then are the subscriptions undeclared, under a watchdog: a
         teardown that hangs (zenoh's undeclare, seen in 2 of ~14 launches at shutdown) ends
-        the process after `grace` seconds with `exit_code` instead of ignoring SIGINT/SIGTERM
-        until a SIGKILL cuts the file. `stop_signal()` is for a signal arriving meanwhile.
+        the process after `grace` seconds with `exit_code` (default: exit_code()) instead of
+        waiting for the launcher's SIGKILL. A second stop signal meanwhile: `stop_now()`.
         Returns the bag's metadata."""
-        self.intake = False
-        if self.sim is not None:
-            self.sim.flush_pending()
         try:
-            meta = self.writer.close()      # raises BagError when a write failed (a full disk)
+            meta = self.complete()      # raises BagError when a write failed (a full disk)
         finally:
-            self.completed = True
-            if self.hurry:
-                log("stopping at once (second stop signal)")
-                os._exit(exit_code)
+            code = self.exit_code() if exit_code is None else exit_code
             done = threading.Event()
 
             def watchdog() -> None:
                 if not done.wait(grace):
                     log(f"the recorder's teardown hung for {grace:g} s after the bag was closed: exiting")
-                    os._exit(exit_code)
+                    os._exit(code)
             threading.Thread(target=watchdog, name="recorder-teardown", daemon=True).start()
             try:
                 self.close()
@@ -341,11 +428,31 @@ class Recorder:
                 done.set()
         return meta
 
-    def stop_signal(self) -> None:
-        """A stop signal during finish(): exit now if the bag is complete, else once it is."""
-        self.hurry = True
-        if self.completed:
-            os._exit(0)
+    def stop_now(self, grace: float = 2.0) -> None:
+        """A second stop signal: end the process now, on the calling thread (StopSignals',
+        never the main thread, which may be inside a zenoh call or holding the writer: a signal
+        handler there cannot run, or would wait on what the interrupted frame holds).
+
+        A complete bag: exit at once (exit_code()). Else the bag is completed on a thread of its
+        own, or by the main thread already at it, for up to `grace` seconds; if it cannot be
+        (the writer hangs), exit 1 with one line: what was flushed (every --flush-interval) is
+        on disk and `bag reindex` rebuilds it. Never returns."""
+        self.intake = False
+        if not self._done.is_set():
+            threading.Thread(target=self._complete_quietly, name="recorder-complete",
+                             daemon=True).start()
+        if self._done.wait(grace):
+            os._exit(self.exit_code())
+        where = self.writer.directory
+        _say(f"error: the bag could not be completed within {grace:g} s of the second stop "
+             f"signal: exiting; {where} holds what was flushed (astrobee bag reindex {where})")
+        os._exit(1)
+
+    def _complete_quietly(self) -> None:
+        try:
+            self.complete()
+        except BaseException:   # noqa: BLE001 - the failure is the exit code (and the writer's line)
+            pass
 
     def close(self) -> None:
         self.intake = False

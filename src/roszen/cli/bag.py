@@ -94,7 +94,7 @@ def _stop_event() -> threading.Event:
 def record_cmd(args) -> int:
     import re
 
-    from roszen.bag.recorder import Recorder, log
+    from roszen.bag.recorder import Recorder, StopSignals, log
     from roszen.bag.writer import BagWriter
     topics = [t if t.startswith("/") else "/" + t for t in args.topics + args.topics_opt]
     if not (topics or args.all or args.regex):
@@ -110,7 +110,10 @@ def record_cmd(args) -> int:
             except re.error as exc:
                 raise CliError(f"invalid regular expression '{rx}': {exc}") from None
     out = args.output or time.strftime("rosbag2_%Y_%m_%d-%H_%M_%S")
-    stop = _stop_event()
+    # SIGINT/SIGTERM served on a thread of their own, whatever the main thread is in (a zenoh
+    # call): the first stops the recording, a second ends the process (StopSignals)
+    signals = StopSignals()
+    stop = signals.stop
     from roszen.cli.common import make_node
     node = make_node("_rosbag2_recorder")     # joins the graph before anything is created
     try:
@@ -129,15 +132,15 @@ def record_cmd(args) -> int:
         if args.use_sim_time and on_rclpy:     # /clock through an rclpy subscription
             from roszen.rclpy_backend.record import RclpySimStamp
             recorder.sim = RclpySimStamp(node, writer.write)
+        signals.on_second = recorder.stop_now     # before: a second signal exits at once
         try:
             recorder.spin(stop)
         finally:
             # the bag is completed before anything that could hang (Recorder.finish); a second
-            # SIGINT/SIGTERM during the teardown after it ends the process at once
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, lambda *_: recorder.stop_signal())
+            # SIGINT/SIGTERM at any moment ends the process at once (the bag completed first,
+            # within a bounded time: Recorder.stop_now)
             try:
-                meta = recorder.finish(exit_code=1 if recorder.failed.is_set() else 0)
+                meta = recorder.finish()
             except BagError as exc:
                 raise CliError(f"{exc}; the bag in {out} holds what was written before "
                                f"(astrobee bag reindex {out})") from None

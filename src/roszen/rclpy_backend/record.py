@@ -6,13 +6,12 @@ followed from any publisher (no GID on a raw sample)."""
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
 import time
 from typing import Any
 
-from ..bag.recorder import Recorder, SimStamp, log
+from ..bag.recorder import Recorder, SimStamp, StopSignals, log
 from ..bag.writer import BagWriter
 from ..qos import CLOCK
 
@@ -70,9 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
     if not (args.topics or args.all):
         p.error("no topics given: pass topic names or -a")
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    signals = StopSignals()     # SIGINT/SIGTERM on a thread of their own (see StopSignals)
+    stop = signals.stop
     ensure_init(None, signal_handler_options=SignalHandlerOptions.NO)
     node = Node("_rosbag2_recorder", start_parameter_services=False, enable_rosout=False)
     node.context = type("Ctx", (), {"graph": NoGraphEvents()})()
@@ -83,12 +81,11 @@ def main(argv: list[str] | None = None) -> int:
                             exclude=args.exclude_regex)
         if args.use_sim_time:
             recorder.sim = RclpySimStamp(node, writer.write)
+        signals.on_second = recorder.stop_now
         try:
             recorder.spin(stop)
         finally:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, lambda *_: recorder.stop_signal())
-            meta = recorder.finish(exit_code=1 if recorder.failed.is_set() else 0)
+            meta = recorder.finish()
             log(f"Recording stopped: {meta.message_count} messages on {len(meta.topics)} "
                 f"topics in {args.output}")
     finally:
