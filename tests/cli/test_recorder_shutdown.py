@@ -16,6 +16,20 @@ from conftest import graph_env
 
 pytestmark = pytest.mark.graph
 
+
+def record_chatter(procs, router, tmp_path, script):
+    """A publisher on /chatter at 50 Hz and `script` (a patched roszen.cli) recording every
+    topic into tmp_path/bag, subscribed: (recorder, bag folder, graph environment)."""
+    env = graph_env(router)
+    pub = procs([sys.executable, "-m", "roszen.cli", "topic", "pub", "-r", "50", "/chatter",
+                 "std_msgs/msg/String", "{data: hello}"], env=env)
+    pub.wait_line("publishing #1")
+    out = tmp_path / "bag"
+    rec = procs([sys.executable, "-c", script, "bag", "record", "-a", "-o", str(out)], env=env)
+    rec.wait_line("Subscribed to topic '/chatter'", stream="err")
+    return rec, out, env
+
+
 HANGING_RECORDER = """
 import sys, time
 import roszen.node
@@ -27,13 +41,7 @@ sys.exit(main(sys.argv[1:]))
 
 @pytest.mark.parametrize("second_signal", [False, True])
 def test_stop_completes_the_bag_even_when_teardown_hangs(procs, router, tmp_path, second_signal):
-    env = graph_env(router)
-    pub = procs([sys.executable, "-m", "roszen.cli", "topic", "pub", "-r", "50", "/chatter",
-                 "std_msgs/msg/String", "{data: hello}"], env=env)
-    pub.wait_line("publishing #1")
-    out = tmp_path / "bag"
-    rec = procs([sys.executable, "-c", HANGING_RECORDER, "bag", "record", "-a", "-o", str(out)], env=env)
-    rec.wait_line("Subscribed to topic '/chatter'", stream="err")
+    rec, out, env = record_chatter(procs, router, tmp_path, HANGING_RECORDER)
     time.sleep(1.0)
     t0 = time.monotonic()
     rec.signal(signal.SIGINT)
@@ -106,14 +114,7 @@ def test_sigterm_ends_a_recorder_whose_exit_is_blocked_in_zenoh(procs, router, t
     """After the bag is complete the process ends in zenoh's session close, which waits for a
     callback in flight: SIGTERM ends it at once, exit 0 (was: served only when close gave up
     after ~10 s, past the launcher's SIGKILL)."""
-    env = graph_env(router)
-    pub = procs([sys.executable, "-m", "roszen.cli", "topic", "pub", "-r", "50", "/chatter",
-                 "std_msgs/msg/String", "{data: hello}"], env=env)
-    pub.wait_line("publishing #1")
-    out = tmp_path / "bag"
-    rec = procs([sys.executable, "-c", BLOCKED_CLOSE_RECORDER, "bag", "record", "-a", "-o", str(out)],
-                env=env)
-    rec.wait_line("Subscribed to topic '/chatter'", stream="err")
+    rec, out, env = record_chatter(procs, router, tmp_path, BLOCKED_CLOSE_RECORDER)
     time.sleep(0.5)
     rec.signal(signal.SIGINT)
     rec.wait_line("teardown blocked", timeout=20, stream="err")
@@ -149,14 +150,7 @@ def test_sigterm_ends_a_recorder_whose_bag_cannot_be_completed(procs, router, tm
     """A SIGTERM after the SIGINT while the bag cannot be completed (the writer hangs) ends the
     process within a bounded grace, exit 1, with one line saying so and how to repair the bag;
     what was flushed is recoverable (was: the SIGTERM waited for the bag, forever)."""
-    env = graph_env(router)
-    pub = procs([sys.executable, "-m", "roszen.cli", "topic", "pub", "-r", "50", "/chatter",
-                 "std_msgs/msg/String", "{data: hello}"], env=env)
-    pub.wait_line("publishing #1")
-    out = tmp_path / "bag"
-    rec = procs([sys.executable, "-c", STALLED_WRITER_RECORDER, "bag", "record", "-a", "-o", str(out)],
-                env=env)
-    rec.wait_line("Subscribed to topic '/chatter'", stream="err")
+    rec, out, env = record_chatter(procs, router, tmp_path, STALLED_WRITER_RECORDER)
     time.sleep(1.5)                    # a flush (every second) puts messages on disk
     rec.signal(signal.SIGINT)
     rec.wait_line("writer stalled", timeout=20, stream="err")
@@ -204,14 +198,7 @@ def test_stop_signals_complete_the_bag_while_the_main_thread_is_blocked(procs, r
     """The main thread stuck in a native call while recording: SIGINT stops the recording and
     the SIGTERM after it completes the bag from another thread and ends the process, exit 0,
     a complete MCAP (was: neither signal was ever served; only SIGKILL ended it)."""
-    env = graph_env(router)
-    pub = procs([sys.executable, "-m", "roszen.cli", "topic", "pub", "-r", "50", "/chatter",
-                 "std_msgs/msg/String", "{data: hello}"], env=env)
-    pub.wait_line("publishing #1")
-    out = tmp_path / "bag"
-    rec = procs([sys.executable, "-c", BLOCKED_MAIN_RECORDER, "bag", "record", "-a", "-o", str(out)],
-                env=env)
-    rec.wait_line("Subscribed to topic '/chatter'", stream="err")
+    rec, out, env = record_chatter(procs, router, tmp_path, BLOCKED_MAIN_RECORDER)
     block = procs([sys.executable, "-m", "roszen.cli", "topic", "pub", "-r", "2", "/block",
                    "std_msgs/msg/String", "{data: block}"], env=env)
     rec.wait_line("main thread blocked", timeout=20, stream="err")
