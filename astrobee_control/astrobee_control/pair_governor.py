@@ -17,6 +17,10 @@ on the robot (the route through the hatch is the robot's) and changes three thin
 - `lever_use: guard` (with `lever`): the force is never bent to make torque; its part across
   the lever is cut only as far as its torque about the centre would take from a saturated
   attitude torque (allocation.guard: the route stops fighting the turn, it does not help it);
+- `clearance` (m, with `lever`): the lever may turn the pair only as far as the walls allow:
+  the force weight grows as (clearance / d)^2 where d, the least clearance of the bag's corners
+  and the robot's faces once each is carried on by its velocity for the stop the force limits
+  allow (stop_share of the smallest), falls below it (astrobee_control.clearance);
 - the position loop's point (`track`): the robot's centre (default) or the pair's centre of
   mass (`centre`: the reference carries the bag at its observed body-frame offset, so turning the
   pair about its centre asks no force; with `lever` the allocation then counts the force's torque
@@ -98,6 +102,11 @@ class GovConfig:
     attitude_share: float = 3.0  # ... reached at this multiple of the attitude tolerance
     route_error: float = 0.0     # m: the force weight grows as (position error / this) past
                                  # it, so the route wins back over the lever (0: constant)
+    clearance: float = 0.0       # m: the force weight grows as (this / predicted clearance)^2
+                                 # below it: the bag's corners and the robot's faces, each
+                                 # carried on by its velocity for the time the force limits
+                                 # need to stop it (0: off)
+    stop_share: float = 0.5      # share of the force limit the stopping time is planned with
     retime: bool = False         # the progress clock (False: follow the plan's clock)
     att_slow: float = 0.15       # rad: attitude error where the progress starts to slow ...
     att_stop: float = 0.35       # ... and where it stops
@@ -175,6 +184,7 @@ class GovController:
         self.config = config
         self.bag: BagObservation | None = None
         self.swing_speed = 0.0             # m/s, bag relative to the robot (last observation)
+        self._keep_in = None               # clearance.KeepIn, built on first use
 
     def reset(self) -> None:
         """Nothing integrates."""
@@ -258,6 +268,31 @@ class GovController:
         self.swing_speed = float(np.linalg.norm(np.asarray(bag.velocity, float)
                                                 - np.asarray(robot.velocity, float)))
 
+    def predicted_clearance(self, state: State) -> float:
+        """The least clearance (m) of the bag's corners and the robot's faces to the keep-in
+        boxes, each point carried on at its velocity for the time a stop takes at stop_share of
+        the smallest force limit on the pair's mass (astrobee_control.clearance)."""
+        from astrobee import config as cfg_files
+        from .clearance import KeepIn
+        if self._keep_in is None:
+            self._keep_in = KeepIn(cfg_files.keep_in_boxes())
+            self._robot_half = 0.5 * float(cfg_files.astrobee()["envelope"])
+        bag = self.bag
+        M = float(self.mass.mass) + float(bag.mass)
+        a = self.config.stop_share * float(np.min(self.flight_mode.max_force)) / M
+        R_b = rot.to_matrix(rot.normalize(bag.orientation))
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        corners = np.asarray(bag.position, float) + (signs * (0.5 * np.asarray(bag.size))) @ R_b.T
+        v_b, v_r = np.asarray(bag.velocity, float), np.asarray(state.velocity, float)
+        now_b = self._keep_in.clearance(corners, 1.0).min()
+        now_r = float(self._keep_in.clearance(np.asarray(state.position, float)[None], 1.0)[0]) \
+            - self._robot_half
+        t_b, t_r = float(np.linalg.norm(v_b)) / a, float(np.linalg.norm(v_r)) / a
+        ahead_b = self._keep_in.clearance(corners + 0.5 * t_b * v_b, 1.0).min()
+        ahead_r = float(self._keep_in.clearance((np.asarray(state.position, float)
+                                                 + 0.5 * t_r * v_r)[None], 1.0)[0]) - self._robot_half
+        return float(min(now_b, now_r, ahead_b, ahead_r))
+
     def step(self, state: State, ref: Reference, dt: float) -> Output:
         """The body wrench for `state` tracking the robot reference `ref`."""
         fm, cfg = self.flight_mode, self.config
@@ -288,6 +323,9 @@ class GovController:
             w_f = 1.0
             if cfg.route_error > 0:
                 w_f = max(1.0, float(np.linalg.norm(e_p)) / cfg.route_error)
+            if cfg.clearance > 0 and self.bag is not None and self.bag.mass > 0:
+                d = self.predicted_clearance(state)
+                w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
             if cfg.lever and cfg.lever_use == "guard":
                 force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
             else:

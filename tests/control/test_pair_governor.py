@@ -141,6 +141,7 @@ def test_registered():
     ({"hold_on_start": 2}, "hold_on_start must be true or false"),
     ({"momentum": 1.5}, "momentum must be in [0, 1]"),
     ({"route_error": -0.1}, "route_error must be a finite number >= 0"),
+    ({"clearance": -0.3}, "clearance must be a finite number >= 0"),
     ({"track": "bag"}, "track must be one of robot, centre"),
 ])
 def test_bad_parameters_one_line(params, words):
@@ -153,3 +154,35 @@ def test_bad_parameters_one_line(params, words):
 
 def test_config_defaults_valid():
     GovConfig().validate()
+
+
+def test_clearance_weights_the_route_near_a_wall():
+    """`clearance`: far from the walls the lever may turn the pair as without it; with the bag
+    carried towards a wall (its stop takes it past the wall) the force weight grows and the
+    allocation bends the force less from the route's wanted force."""
+    from astrobee.scenario import Scenario
+    sc = Scenario.load("node2_to_jem_fem_bag")
+    p, q = np.array(sc.robots[0].position, float), np.array(sc.robots[0].orientation, float)
+    q_turned = rot.multiply(q, rot.from_rotvec(np.array([0.0, 0.6, 0.0])))
+
+    def bent(v: np.ndarray, params: dict) -> tuple[float, float]:
+        """(how far the lever law bends the force from the route's, predicted clearance); the
+        reference moves with the pair, 2 cm off."""
+        st = State(p, v, q_turned, np.zeros(3))
+        ref = Reference(p + np.array([0.0, 0.0, 0.02]), v, orientation=q)
+        law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
+        law.observe_bag(BagObservation(p + rot.rotate(q_turned, OFFSET), q_turned, v,
+                                       np.zeros(3), True, 10.0, np.array([0.5, 0.42, 0.25]),
+                                       "fem"), st)
+        out = law.pd.step(st, ref, 0.016)
+        plain = make_gov_law(FM, mp.robot(), {})
+        plain.observe_bag(law.pd.bag, st)
+        want = plain.pd.step(st, ref, 0.016).force
+        return float(np.linalg.norm(out.force - want)), law.pd.predicted_clearance(st)
+
+    still, calm = bent(np.zeros(3), {"clearance": 0.3})
+    assert still == pytest.approx(bent(np.zeros(3), {})[0], rel=1e-9) and calm > 0.3
+    towards = np.array([0.0, 0.0, -0.15])           # the bag carried down at 0.15 m/s
+    near, d = bent(towards, {"clearance": 0.3})
+    free, _ = bent(towards, {})
+    assert d < 0.3 and free > 0.05 and near < 0.5 * free
