@@ -26,9 +26,12 @@ def brute_force(f_des, tau_des, lever, n=81, w_f=1.0, w_t=30.0, around=None, spa
     return F[i], tau[i], float(c[i])
 
 
-def test_unsaturated_is_exact():
+@pytest.mark.parametrize("solve", [al.allocate, al.guard])
+def test_unsaturated_is_exact(solve):
+    """Nothing saturates: the wanted force whole, its torque about the centre cancelled (the
+    least squares and the guard alike)."""
     f_des, tau_des = np.array([0.1, -0.05, 0.02]), np.array([0.001, -0.002, 0.003])
-    F, tau = al.allocate(f_des, tau_des, LEVER, F_LIM, T_LIM)
+    F, tau = solve(f_des, tau_des, LEVER, F_LIM, T_LIM)
     np.testing.assert_allclose(F, f_des, atol=1e-12)
     np.testing.assert_allclose(tau - np.cross(LEVER, F), tau_des, atol=1e-12)
 
@@ -69,14 +72,6 @@ def test_scipy_fallback_agrees():
         x = al.box_lsq(A, b)
         ref = lsq_linear(A, b, bounds=(-np.ones(6), np.ones(6)), method="bvls").x
         assert np.sum((A @ x - b) ** 2) <= np.sum((A @ ref - b) ** 2) + 1e-9
-
-
-def test_guard_unsaturated_is_exact():
-    """Nothing saturates: the guard leaves the wanted force whole and cancels its torque."""
-    f_des, tau_des = np.array([0.1, -0.05, 0.02]), np.array([0.001, -0.002, 0.003])
-    F, tau = al.guard(f_des, tau_des, LEVER, F_LIM, T_LIM)
-    np.testing.assert_allclose(F, f_des, atol=1e-12)
-    np.testing.assert_allclose(tau - np.cross(LEVER, F), tau_des, atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(12))
