@@ -16,6 +16,10 @@ import numpy as np
 
 from astrobee.station import passage_boxes
 
+# the 8 corners of a unit box about its centre (x half-size per axis: a box's corners, whose
+# clearance bounds the box's)
+CUBE = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+
 
 class KeepIn:
     """The keep-in union (keep-in boxes + passage boxes) as signed-distance queries."""

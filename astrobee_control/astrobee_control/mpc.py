@@ -32,7 +32,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 from astrobee.bezier import control_points
 
-from .clearance import KeepIn
+from .clearance import CUBE, KeepIn
 from .law import BagObservation, Step
 from .handle_models import identified_handles, rotate_by
 from .mass import MassProperties
@@ -44,8 +44,6 @@ from .reduced_model import CandidateReferences, Gains, RolloutModel, RolloutStar
 from .reference import SampledTrajectory
 from .registry import Controller
 from .tracking import CONTROLLING, SETTLE_TIME, PdLaw, check_settle_time
-
-_CUBE = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
 class MpcLaw(AttitudeMode):
@@ -232,7 +230,7 @@ class MpcLaw(AttitudeMode):
             - c.robot_half_size
         relvel = np.zeros_like(track)
         if out.bag_position is not None:
-            body_c = (_CUBE * (start.bag_size / 2)) @ start.bag_rotation.T      # (8, 3) body
+            body_c = (CUBE * (start.bag_size / 2)) @ start.bag_rotation.T      # (8, 3) body
             turn = getattr(out, "bag_turn", None)
             if turn is None:
                 bag_c = np.einsum("kij,pj->kpi", R, body_c)[None]            # (1, K, 8, 3)

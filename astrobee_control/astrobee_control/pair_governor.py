@@ -148,6 +148,8 @@ class GovConfig:
             raise ValueError(f"momentum must be in [0, 1], got {self.momentum!r}")
         if not 0 < self.brake_share <= 1:
             raise ValueError(f"brake_share must be in (0, 1], got {self.brake_share!r}")
+        if not 0 < self.stop_share <= 1:
+            raise ValueError(f"stop_share must be in (0, 1], got {self.stop_share!r}")
         for a, b in (("att_slow", "att_stop"), ("rate_slow", "rate_stop"),
                      ("swing_slow", "swing_stop")):
             if not getattr(self, a) < getattr(self, b):
@@ -273,7 +275,7 @@ class GovController:
         boxes, each point carried on at its velocity for the time a stop takes at stop_share of
         the smallest force limit on the pair's mass (astrobee_control.clearance)."""
         from astrobee import config as cfg_files
-        from .clearance import KeepIn
+        from .clearance import CUBE, KeepIn
         if self._keep_in is None:
             self._keep_in = KeepIn(cfg_files.keep_in_boxes())
             self._robot_half = 0.5 * float(cfg_files.astrobee()["envelope"])
@@ -281,17 +283,15 @@ class GovController:
         M = float(self.mass.mass) + float(bag.mass)
         a = self.config.stop_share * float(np.min(self.flight_mode.max_force)) / M
         R_b = rot.to_matrix(rot.normalize(bag.orientation))
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        corners = np.asarray(bag.position, float) + (signs * (0.5 * np.asarray(bag.size))) @ R_b.T
+        corners = np.asarray(bag.position, float) + (CUBE * (0.5 * np.asarray(bag.size))) @ R_b.T
         v_b, v_r = np.asarray(bag.velocity, float), np.asarray(state.velocity, float)
-        now_b = self._keep_in.clearance(corners, 1.0).min()
-        now_r = float(self._keep_in.clearance(np.asarray(state.position, float)[None], 1.0)[0]) \
-            - self._robot_half
-        t_b, t_r = float(np.linalg.norm(v_b)) / a, float(np.linalg.norm(v_r)) / a
-        ahead_b = self._keep_in.clearance(corners + 0.5 * t_b * v_b, 1.0).min()
-        ahead_r = float(self._keep_in.clearance((np.asarray(state.position, float)
-                                                 + 0.5 * t_r * v_r)[None], 1.0)[0]) - self._robot_half
-        return float(min(now_b, now_r, ahead_b, ahead_r))
+        p_r = np.asarray(state.position, float)
+        # now and at the stop (v t / 2, t = |v| / a), the bag's corners and the robot's centre in
+        # one query
+        pts = np.vstack([corners, corners + (0.5 * float(np.linalg.norm(v_b)) / a) * v_b,
+                         p_r, p_r + (0.5 * float(np.linalg.norm(v_r)) / a) * v_r])
+        d = self._keep_in.clearance(pts, 1.0)
+        return float(min(d[:16].min(), d[16:].min() - self._robot_half))
 
     def step(self, state: State, ref: Reference, dt: float) -> Output:
         """The body wrench for `state` tracking the robot reference `ref`."""
@@ -323,7 +323,8 @@ class GovController:
             w_f = 1.0
             if cfg.route_error > 0:
                 w_f = max(1.0, float(np.linalg.norm(e_p)) / cfg.route_error)
-            if cfg.clearance > 0 and self.bag is not None and self.bag.mass > 0:
+            if cfg.clearance > 0 and cfg.lever and cfg.lever_use == "help" \
+                    and self.bag is not None and self.bag.mass > 0:   # w_f weighs only the lever
                 d = self.predicted_clearance(state)
                 w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
             if cfg.lever and cfg.lever_use == "guard":

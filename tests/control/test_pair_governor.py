@@ -142,6 +142,7 @@ def test_registered():
     ({"momentum": 1.5}, "momentum must be in [0, 1]"),
     ({"route_error": -0.1}, "route_error must be a finite number >= 0"),
     ({"clearance": -0.3}, "clearance must be a finite number >= 0"),
+    ({"stop_share": 0.0}, "stop_share must be in (0, 1]"),
     ({"track": "bag"}, "track must be one of robot, centre"),
 ])
 def test_bad_parameters_one_line(params, words):
