@@ -50,8 +50,8 @@ the route while the force turns the pair. The grasp's lever with the centre trac
 turning the pair drives it into the walls at the larger bumps); the clamp at 5 N 13/20 vs PD's
 7/20 (McNemar p 0.031). Through the CBF filter at 10 N (seeds 0-9): contacts 4/10, success 1/10.
 The guard (`lever: true, lever_use: guard`, seeds 0-19 at 5 N, the study's setting, fifth
-session): centre-tracked 10/20 with 8 contact flights, robot-tracked 8/20 with 11 (PD 10/20, 0
-contacts); attitude excursion 0.23-1.2 rad, but with the cross-lever force cut while the
+session, studies/lever_variants.yaml): centre-tracked 10/20 with 9 contact flights, robot-tracked
+8/20 with 11 (PD 10/20, 0 contacts); attitude excursion 0.14-1.23 rad, but with the cross-lever force cut while the
 attitude saturates the bump's momentum is not taken out and the pair drifts 0.66-1.16 m off
 the route into the walls: on this bag the route has to win over the attitude, not yield to it.
 What is left after the bump is a bag resting at a new angle on its strap (the trace: its centre
