@@ -20,6 +20,8 @@ import numpy as np
 from astrobee import config
 from astrobee.station import drop_contained, grow, merged_chains, robot_radius
 
+from ..clearance import CUBE
+
 CHAIN_ROUNDS = 4    # chains of up to five keep-in boxes
 MIN_CROSS = 0.3     # m: the narrowest cross-section a merged corridor keeps
 
@@ -46,8 +48,7 @@ def box_corners(centre_offset: np.ndarray, size: np.ndarray,
     c = np.asarray(centre_offset, float)
     half = 0.5 * np.asarray(size, float)
     r = np.eye(3) if rotation_body is None else np.asarray(rotation_body, float)
-    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
-    return [BodySphere(c + r @ (s * half), 0.0) for s in signs]
+    return [BodySphere(c + r @ (s * half), 0.0) for s in CUBE]
 
 
 def box_sphere(centre_offset: np.ndarray, size: np.ndarray) -> BodySphere:
