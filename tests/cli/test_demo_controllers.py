@@ -1,5 +1,7 @@
-"""The demo's legs and per-robot controllers (cargo_transport.generate_nodes, no processes)."""
+"""The demo's legs and per-robot controllers (cargo_transport.generate_nodes, no processes;
+the last test builds the controller node in-process on the test router)."""
 import pytest
+import yaml
 
 from astrobee.scenario import Scenario
 from astrobee_bringup.launch import cargo_transport
@@ -38,3 +40,79 @@ def test_controller_argument_applies_to_every_robot(tmp_path):
     assert "queen/mpc_controller_node" in nodes(tmp_path, scenario="node2_to_jem_fem_bag_mpc")
     with pytest.raises(LaunchError, match="controller must be"):
         nodes(tmp_path, scenario="node2_to_jem", controller="lqr")
+
+
+GOV_CLEAR = {"pair_gov": {"lever": True, "clearance": 0.3}}     # studies/lever_clearance.yaml
+
+
+def params_file(spec) -> dict:
+    """The ros__parameters of a controller's params file (its first parameters entry)."""
+    (node, body), = yaml.safe_load(spec.parameters[0].read_text()).items()
+    return body["ros__parameters"]
+
+
+def test_controller_params_reach_every_robot_flying_the_law(tmp_path):
+    """controller_params:= over config/controllers.yaml: the law's params file carries the
+    merged overrides (gov_clear); a law of the file no robot flies (mpc) is checked, then left
+    out."""
+    given = tmp_path / "gov_clear.yaml"
+    given.write_text(yaml.safe_dump({**GOV_CLEAR, "mpc": {"samples": 64}}))
+    config = tmp_path / "config"
+    config.mkdir()
+    (config / "controllers.yaml").write_text(yaml.safe_dump(
+        {"pair_gov": {"clearance": 0.1, "momentum": 0.5}, "pd": {"settle_time": 4.0}}))
+    ctx = LaunchContext({"scenario": "two_robots_bag", "controller": "pair_gov",
+                         "controller_params": str(given)}, config, tmp_path / "run", False, 7447)
+    specs = [s for s in cargo_transport.generate_nodes(ctx) if "controller_node" in s.name]
+    assert sorted(s.name for s in specs) == ["bumble/pair_gov_controller_node",
+                                             "pair_gov_controller_node"]
+    assert all(params_file(s) == {"clearance": 0.3, "momentum": 0.5, "lever": True} for s in specs)
+    assert sorted(p.name for p in (tmp_path / "run" / "params").iterdir()) == \
+        ["pair_gov_controller_node.yaml"]
+    # without the argument: config/controllers.yaml's section alone, as before
+    ctx = LaunchContext({"scenario": "node2_to_jem"}, config, tmp_path / "run2", False, 7447)
+    pd = next(s for s in cargo_transport.generate_nodes(ctx) if s.name == "pd_controller_node")
+    assert params_file(pd) == {"settle_time": 4.0}
+
+
+@pytest.mark.parametrize("site, says", [
+    ({"pair_gov": {"clearence": 0.3}}, "pair_gov has no parameter 'clearence' (did you mean "
+                                       "'clearance'?)"),
+    ({"pair_gov": {"clearance": -1}}, "controller pair_gov: clearance must be a finite number "
+                                      ">= 0"),
+    ({"pair_gov": {"clearance": "far"}}, "pair_gov parameter 'clearance': expected double"),
+    ({"pair_gov": 3}, "pair_gov must map parameter names to values, got 3"),
+])
+def test_config_controllers_yaml_overrides_are_checked(tmp_path, site, says):
+    """config/controllers.yaml's section is checked as merged: a name the law does not have (it
+    was passed to the node, which ignored it) and a section that is no mapping (it was a
+    TypeError) are one line too."""
+    (tmp_path / "controllers.yaml").write_text(yaml.safe_dump(site))
+    ctx = LaunchContext({"scenario": "node2_to_jem_fem_bag_pair_gov"}, tmp_path, tmp_path / "run",
+                        False, 7447)
+    with pytest.raises(LaunchError) as err:
+        cargo_transport.generate_nodes(ctx)
+    assert says in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "run").exists()
+
+
+def test_controller_params_reach_the_law_in_the_node(tmp_path, router_env):
+    """The controller node built from the launch's own argv (params file, name, namespace)
+    flies gov_clear: its law's config has the lever and the clearance weight."""
+    from astrobee_bringup.process_group import Launcher
+    from astrobee_control.controller_node import ControllerNode
+    from astrobee_control import registry
+    given = tmp_path / "gov_clear.yaml"
+    given.write_text(yaml.safe_dump(GOV_CLEAR))
+    specs = nodes(tmp_path, scenario="node2_to_jem_fem_bag_pair_gov",
+                  controller_params=str(given))
+    spec = specs["queen/pair_gov_controller_node"]
+    argv = Launcher([spec], astrobee_cmd=["astrobee"]).argv_for(spec)
+    law = registry.get("pair_gov")
+    node = ControllerNode(law.make_law, law.node_name, dict(law.params()),
+                          ["controller_node"] + argv[argv.index("--ros-args"):])
+    try:
+        assert node.node.get_parameter("clearance").value == 0.3
+        assert node.law.pd.config.lever is True and node.law.pd.config.clearance == 0.3
+    finally:
+        node.node.destroy_node()

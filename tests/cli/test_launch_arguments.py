@@ -1,7 +1,7 @@
 """Launch arguments of cargo_transport checked before anything starts: each bad
-value is one line naming the argument, exit 1, no process started and no run folder (nor a
-rosbag2_<time>/ in the working directory); numbers reach sim_node as YAML floats; the mission
-stopped while it starts exits 130 without a traceback."""
+value (a bad controller_params file too) is one line naming the argument, exit 1, no process
+started and no run folder (nor a rosbag2_<time>/ in the working directory); numbers reach
+sim_node as YAML floats; the mission stopped while it starts exits 130 without a traceback."""
 from __future__ import annotations
 
 import subprocess
@@ -55,6 +55,83 @@ def test_a_bad_argument_is_one_line_before_anything(args, says, tmp_path, monkey
     assert len(lines) == 1 and lines[0].startswith("astrobee launch: ") and says in lines[0], err
     assert "Traceback" not in out + err
     assert list(tmp_path.iterdir()) == []          # no runs/<time>, no rosbag2_<time>
+
+
+# controller_params:= files (written into a folder of their own): content -> what the line says
+BAD_CONTROLLER_PARAMS = [
+    (None, "no such file"),
+    ("pair_gov: {lever: true\n  clearance: [\n", "not valid YAML: expected ',' or '}', but "
+                                                   "got ':' (line 2, column 12)"),
+    ("", "does not hold a mapping <law>: {name: value}"),
+    ("- pair_gov\n", "does not hold a mapping <law>: {name: value}"),
+    ("lqr: {gain: 1}\n", "'lqr' is not a controller (mpc, pair"),
+    ("pair_gov: 3\n", "pair_gov must map parameter names to values, got 3"),
+    ("pair_gov: {clearence: 0.3}\n", "pair_gov has no parameter 'clearence' (did you mean "
+                                     "'clearance'?)"),
+    ("pair_gov: {clearance: far}\n", "pair_gov parameter 'clearance': expected double, got "
+                                     "string value 'far'"),
+    ("pair_gov: {lever: 1}\n", "pair_gov parameter 'lever': expected bool"),
+    ("pair_gov: {clearance: -1}\n", "pair_gov: clearance must be a finite number >= 0, got -1"),
+    ("pair_gov: {att_slow: 0.9, att_stop: 0.2}\n", "pair_gov: att_slow (0.9) must be below "
+                                                   "att_stop (0.2)"),
+    # a law no robot flies (node2_to_jem: PD) is checked all the same
+    ("pd: {}\nmpc: {samples: 1.5}\n", "mpc parameter 'samples': expected integer"),
+]
+
+
+@pytest.mark.parametrize("content, says", BAD_CONTROLLER_PARAMS,
+                         ids=[says.split(":")[0][:30] for _, says in BAD_CONTROLLER_PARAMS])
+def test_a_bad_controller_params_file_is_one_line_before_anything(content, says, tmp_path,
+                                                                  monkeypatch, capsys, no_start):
+    given = tmp_path / "files" / "params.yaml"
+    given.parent.mkdir()
+    if content is not None:
+        given.write_text(content)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    code = launch_main(["cargo_transport", f"controller_params:={given}", "--port", "1"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    lines = err.splitlines()
+    assert len(lines) == 1 and says in lines[0], err
+    assert lines[0].startswith(f"astrobee launch: controller_params {given}: "), err
+    assert "Traceback" not in out + err
+    assert list(work.iterdir()) == []              # no runs/<time>, no rosbag2_<time>
+
+
+@pytest.mark.parametrize("what, says", [("folder", "not a file"),
+                                        ("unreadable", "cannot read it (Permission denied)"),
+                                        ("binary", "not a text (UTF-8) file"),
+                                        ("", "controller_params must be a YAML file path, got ''")])
+def test_a_controller_params_file_that_cannot_be_read_is_one_line(what, says, tmp_path,
+                                                                  monkeypatch, capsys, no_start):
+    given = tmp_path / "params.yaml"
+    if what == "folder":
+        given.mkdir()
+    elif what == "binary":
+        given.write_bytes(b"\xff\xfe\x00")
+    elif what == "unreadable":                      # (as root chmod 000 reads all the same)
+        given.write_text("pd: {}\n")
+        real = cargo_transport.load_yaml
+
+        def denied(path):
+            if path == given:
+                raise PermissionError(13, "Permission denied")
+            return real(path)
+        monkeypatch.setattr(cargo_transport, "load_yaml", denied)
+    monkeypatch.chdir(tmp_path)
+    code = launch_main(["cargo_transport", f"controller_params:={given if what else ''}",
+                        "--port", "1"])
+    err = capsys.readouterr().err
+    assert code == 1 and len(err.splitlines()) == 1 and says in err, err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_controller_params_is_a_declared_argument():
+    assert "controller_params" in launcher.declared_arguments("cargo_transport")
+    text = launcher.format_arguments("cargo_transport")
+    assert "    'controller_params':" in text and "config/controllers.yaml" in text
 
 
 def test_the_real_command_refuses_bag_dir_in_proc(tmp_path):

@@ -24,6 +24,21 @@ FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) wi
 node2_to_jem_fem_bag_pair_gov: the same carry, seed and bump flown by the governed pair law;
 video_compare.mp4 shows the two carries side by side).
 
+Controller parameters: each law's node gets the law's defaults, then config/controllers.yaml's
+section for it (`<law>: {name: value}`), then the section of the file controller_params:=PATH
+names (the same shape; for every robot flying that law), e.g. gov_clear, the governed pair law
+with its lever and clearance weight (studies/lever_clearance.yaml):
+
+    # gov_clear.yaml:  pair_gov: {lever: true, clearance: 0.3}
+    astrobee launch cargo_transport scenario:=node2_to_jem_fem_bag_pair_gov \
+        controller_params:=gov_clear.yaml
+
+The merged overrides are checked before any process starts (a missing or unreadable file,
+content that is not such a mapping, a law not registered, a parameter the law does not have,
+a value of the wrong type or one the law's check refuses: one line, exit 1) and written to
+<run>/params/<law>_controller_node.yaml; a law of the file no robot flies is checked, then
+ignored.
+
 Controllers: each robot gets the controller its scenario names (`controller:` in the scenario
 file, pd when it names none; an explicit controller:= argument applies to every robot). A
 per-robot controller, rather than a second graph run or a switch inside one controller node,
@@ -37,19 +52,22 @@ exits, so the bag holds the fault and the coasting robot. Without it, the contro
 """
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import re
 import tempfile
 from pathlib import Path
+from typing import Any
 
-from astrobee.config import load_yaml
+from astrobee.config import ConfigError, load_yaml
 from astrobee.overrides import (BAG_MODELS, FEM_SOLVERS, NO_BAG, OVERRIDE_KEYS, Overrides,
                                 parse_overrides)
 from astrobee.scenario import Scenario, ScenarioError
 from astrobee_bringup.launcher import LaunchContext, flatten_params, write_params_file
 from astrobee_bringup.process_group import LaunchError, NodeSpec
 from astrobee_control import registry
+from roszen.parameters import coerce, infer_type
 
 
 # no bag (PD); the FEM bag on the strap grasp with a 5 N bump on the bag drawn from the seed,
@@ -69,6 +87,9 @@ ARGUMENTS = {
     "scenario": ("node2_to_jem", "config/scenarios/<name>.yaml to fly"),
     "controller": ("", f"{registry.choices_text(' | ')} for every robot ('': each scenario's "
                        "`controller:`, else pd)"),
+    "controller_params": ("", "a YAML file `<law>: {name: value}` (config/controllers.yaml's "
+                          "shape) whose values override config/controllers.yaml's for every "
+                          "robot flying that law; checked before any process starts"),
     "clock": ("lockstep", "realtime | fast | lockstep (lockstep: the sim waits for each "
                           "command; realtime with gui)"),
     "lockstep_timeout": ("", "wall s the sim waits for a tick's command (the sim's default)"),
@@ -156,6 +177,75 @@ def _check_bag_dir(ctx: LaunchContext, bag_dir: str) -> None:
                           f"({exc.strerror or exc})") from None
 
 
+def read_controller_params(arg: str) -> dict[str, dict[str, Any]]:
+    """The controller_params file: law -> {name: value} (one LaunchError line naming the
+    argument for a file that is missing, unreadable, not YAML or not such a mapping)."""
+    where = f"controller_params {arg}"
+    if not arg.strip():
+        raise LaunchError("controller_params must be a YAML file path, got ''")
+    path = Path(arg).absolute()     # absolute: load_yaml looks a missing relative one up in config/
+    if not path.is_file():
+        raise LaunchError(f"{where}: {'not a file' if path.exists() else 'no such file'}")
+    try:
+        data = load_yaml(path)
+    except OSError as exc:
+        raise LaunchError(f"{where}: cannot read it ({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise LaunchError(f"{where}: not a text (UTF-8) file") from None
+    except ConfigError as exc:          # load_yaml: a YAML error as its cause, else not a mapping
+        mark = getattr(exc.__cause__, "problem_mark", None)
+        if exc.__cause__ is None:
+            raise LaunchError(f"{where}: does not hold a mapping <law>: {{name: value}}") from None
+        raise LaunchError(f"{where}: not valid YAML"
+                          + (f": {exc.__cause__.problem} (line {mark.line + 1}, column "
+                             f"{mark.column + 1})" if mark is not None else "")) from None
+    known = registry.names()
+    for kind, section in data.items():
+        if kind not in known:
+            raise LaunchError(f"{where}: {kind!r} is not a controller ({registry.choices_text()})")
+        if section is not None and not isinstance(section, dict):
+            raise LaunchError(f"{where}: {kind} must map parameter names to values, "
+                              f"got {section!r}")
+    return {kind: dict(section or {}) for kind, section in data.items()}
+
+
+def controller_overrides(ctx: LaunchContext, kinds: set[str]) -> dict[str, dict[str, Any]]:
+    """Each law of `kinds` and of the controller_params file: config/controllers.yaml's section
+    with the file's over it, checked (names, parameter types, the law's own check): law ->
+    {name: value}. A bad one is one LaunchError line naming where it came from."""
+    site_path = ctx.config_dir / "controllers.yaml"
+    site = load_yaml(site_path)
+    arg = ctx.arg("controller_params")
+    given = read_controller_params(arg) if "controller_params" in ctx.arguments else {}
+    out = {}
+    for kind in sorted(kinds | set(given)):
+        law = registry.get(kind)
+        section = site.get(kind) or {}
+        if not isinstance(section, dict):
+            raise LaunchError(f"controller {kind}: {site_path}: {kind} must map parameter names "
+                              f"to values, got {section!r}")
+        mine = flatten_params(given.get(kind, {}))
+        for name, value in {**flatten_params(section), **mine}.items():
+            where = (f"controller_params {arg}" if name in mine
+                     else f"controller {kind}: {site_path}")
+            if name not in law.parameters:
+                near = difflib.get_close_matches(name, list(law.parameters), n=1)
+                raise LaunchError(f"{where}: {kind} has no parameter {name!r}"
+                                  + (f" (did you mean {near[0]!r}?)" if near else ""))
+            try:                        # the type check the node's declare_parameter makes
+                coerce(value, infer_type(law.parameters[name]))
+            except (TypeError, ValueError) as exc:
+                raise LaunchError(f"{where}: {kind} parameter {name!r}: {exc}") from None
+        merged = {**section, **given.get(kind, {})}
+        try:                            # the law's defaults + the merged overrides, checked
+            law.check_params(merged)
+        except ValueError as exc:
+            where = f"controller_params {arg}: {kind}" if mine else f"controller {kind}"
+            raise LaunchError(f"{where}: {exc}") from None
+        out[kind] = merged
+    return out
+
+
 def scenario_overrides(ctx: LaunchContext) -> Overrides:
     """Launch arguments that change the scenario (astrobee.overrides: one parser, one line)."""
     try:
@@ -205,17 +295,16 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
                                   f"{kind} in {leg}: one controller per robot")
         if built.bag is not None and len(names) > 1 and built.bag.handles == len(names):
             shares.update({r: built.bag.mass / len(names) for r in names})
+    # config/controllers.yaml's sections with controller_params' over them, checked; a law of
+    # the file no robot flies is checked and left out
+    overrides_by_law = controller_overrides(ctx, set(kinds.values()))
     ctl_params = {}                     # controller kind -> its parameters file
     for kind in sorted(set(kinds.values())):
         law = registry.get(kind)
-        try:                            # the law's defaults + config/controllers.yaml, checked
-            law.check_params()
-        except ValueError as exc:
-            raise LaunchError(f"controller {kind}: {exc}") from None
-        # the node declares the law's defaults; the file carries the site's overrides
+        # the node declares the law's defaults; the file carries the merged overrides
         ctl_params[kind] = write_params_file(
             ctx.run_dir / "params" / f"{law.node_name}.yaml", law.node_name,
-            flatten_params(load_yaml(ctx.config_dir / "controllers.yaml").get(kind) or {}))
+            flatten_params(overrides_by_law[kind]))
     common = {"scenario": scenario, "use_sim_time": True}
     sim_params = {**common, "clock_mode": clock, "gui": gui}
     if ctx.arg("lockstep_timeout").strip():     # checked by check_arguments
