@@ -9,8 +9,10 @@ The FEM bag on the fast solver (the default) and on Bullet's (the reference), sa
 Table 2: the whole graph as `astrobee launch cargo_transport` starts it (router,
 sim_node in lockstep, planner, the PD or MPC controller process, mission; no recorder) flying
 Node 2 -> JEM with the FEM bag: the mission's real-time factor over the 44 s flight. Bullet's
-solver in the same run as the reference; the pair laws (pair_gov, wmpc) on the demo's carry
-(strap grasp, a 5 N bump on the bag) beside PD on the same flight. And K=64 batched copies of the fast FEM bag + robot
+solver in the same run as the reference; the pair laws (pair_gov, gov_clear: pair_gov with its
+lever and clearance weight as studies/lever_clearance.yaml flies it, through controller_params:=,
+and wmpc) on the demo's carry (strap grasp, a 5 N bump on the bag) beside PD on the same flight.
+And K=64 batched copies of the fast FEM bag + robot
 (fem_rollout) in bag-seconds per wall second.
 Reference: pyastrobee 0.6x real time at 379 FEM nodes (FACTS.md section 6).
 Targets: >= 3x at ~400 nodes (goal 10x), >= 1x at ~1500 nodes, >= 50x for the reduced
@@ -42,15 +44,19 @@ TARGET_FEM_1500 = 1.0
 # (Bullet's FEM bag then)
 ROUND1 = {("fem", 400, "bullet"): (1.1, 0.8), ("constraint", 0, ""): (32.9, 11.8),
           ("composite", 0, ""): (4.0, 3.6), ("rigid", 0, ""): (36.7, 13.5)}
-# the graph rows: (controller, FEM nodes, solver, target, scenario); --full adds the 1500-node
-# ones. BUMP: the demo's carry (strap grasp, a 5 N bump on the bag from the seed) for the pair
-# laws beside PD on the same flight
+# the graph rows: (controller, FEM nodes, solver, target, scenario); the controller is a
+# registered law or a study's controller label (VARIANTS); --full adds the 1500-node ones.
+# BUMP: the demo's carry (strap grasp, a 5 N bump on the bag from the seed) for the pair laws
+# beside PD on the same flight
 BUMP = "node2_to_jem_fem_bag_bump"
 GRAPH = [("pd", 400, "fast", "3x (goal 10x)", "node2_to_jem_bag"),
          ("pd", 400, "bullet", "reference", "node2_to_jem_bag"),
          ("mpc", 400, "fast", "1x", "node2_to_jem_bag"),
          ("pd", 400, "fast", "reference", BUMP), ("pair_gov", 400, "fast", "1x", BUMP),
-         ("wmpc", 400, "fast", "1x", BUMP)]
+         ("gov_clear", 400, "fast", "1x", BUMP), ("wmpc", 400, "fast", "1x", BUMP)]
+# controller labels of a row that are a law with parameters: label -> the study defining it
+# (its `controllers: {label: {controller, params}}`), flown with controller_params:=
+VARIANTS = {"gov_clear": "studies/lever_clearance.yaml"}
 GRAPH_FULL = [("pd", 1500, "fast", "1x", "node2_to_jem_bag"),
               ("pd", 1500, "bullet", "reference", "node2_to_jem_bag")]
 
@@ -251,20 +257,37 @@ def _start_recorded(node, proc, timeout: float = 60.0) -> bool:
     return True
 
 
+def controller_of(label: str) -> tuple[str, dict]:
+    """(registered law, its parameters over config/controllers.yaml) of a row's controller
+    label: a law itself, or a study's controller (VARIANTS)."""
+    if label not in VARIANTS:
+        return label, {}
+    from astrobee.config import load_yaml, project_root
+    spec = load_yaml(project_root() / VARIANTS[label])["controllers"][label]
+    return spec["controller"], dict(spec.get("params") or {})
+
+
 def graph_rtf(controller: str, res: int, solver: str, scenario: str = "node2_to_jem_bag",
-              timeout: float = 900.0) -> tuple[float, str]:
+              timeout: float = 900.0, params: dict | None = None) -> tuple[float, str]:
     """The whole cargo_transport graph (lockstep, no recorder) flying `scenario` (Node 2 ->
-    JEM) with the FEM bag: (the mission's real-time factor over the flight, its verdict)."""
+    JEM) with the FEM bag: (the mission's real-time factor over the flight, its verdict).
+    `params`: the law's parameters over config/controllers.yaml (controller_params:=)."""
     import json
     import subprocess
     import sys
     import tempfile
+    import yaml
     from roszen import testing
     with tempfile.TemporaryDirectory(prefix="sim_rtf_graph_") as run:
         cmd = [sys.executable, "-m", "astrobee_bringup.cli", "launch", "cargo_transport",
                "--port", str(testing.free_port()), "--run-dir", run,
                f"scenario:={scenario}", "bag_model:=fem", f"bag_resolution:={res}",
                f"fem_solver:={solver}", f"controller:={controller}", "record:=false", "video:=false"]
+        if params:
+            given = f"{run}/controller_params.yaml"
+            with open(given, "w") as f:
+                yaml.safe_dump({controller: params}, f)
+            cmd.append(f"controller_params:={given}")
         try:
             subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=timeout)
             leg = json.load(open(f"{run}/summary.json"))["legs"][0]
@@ -362,15 +385,20 @@ def main() -> None:
                   f"{r1[0]:>16.1f}x /{r1[1]:>5.1f}x  {ref}")
     if a.no_graph:
         return
-    graph = [(c, r, sv, tg, sc, *graph_rtf(c, r, sv, sc))
-             for c, r, sv, tg, sc in GRAPH + (GRAPH_FULL if a.full else [])]
+    import os
+    graph = []
+    for c, r, sv, tg, sc in GRAPH + (GRAPH_FULL if a.full else []):
+        law, params = controller_of(c)
+        load = os.getloadavg()[0]                   # at the row's start (the machine is shared)
+        graph.append((c, r, sv, tg, sc, *graph_rtf(law, r, sv, sc, params=params), load))
     print("\nthe whole graph (astrobee launch cargo_transport, lockstep, no recorder) flying "
           "Node 2 -> JEM (44 s) with the FEM bag: the mission's real-time factor; "
-          f"{BUMP}: the strap grasp and a 5 N bump on the bag (the demo's carry)")
+          f"{BUMP}: the strap grasp and a 5 N bump on the bag (the demo's carry); "
+          + "; ".join(f"{k}: {controller_of(k)[0]} with {controller_of(k)[1]}" for k in VARIANTS))
     print(f"{'controller':<11}{'nodes':>6}{'solver':>8}{'real time':>11}  {'target':<16}"
-          f"{'scenario':<27}verdict")
-    for c, r, sv, tg, sc, rtf, why in graph:
-        print(f"{c:<11}{r:>6}{sv:>8}{rtf:>10.1f}x  {tg:<16}{sc:<27}{why}")
+          f"{'scenario':<27}{'load':>5}  verdict")
+    for c, r, sv, tg, sc, rtf, why, load in graph:
+        print(f"{c:<11}{r:>6}{sv:>8}{rtf:>10.1f}x  {tg:<16}{sc:<27}{load:>5.1f}  {why}")
     if a.graph_only:
         return
     k64, n64 = batched_rtf(400, 64, 0.15 * scale)
