@@ -1,12 +1,12 @@
 """Fly the oracle's plans in the FEM simulator (astrobee_lab.oracle.fly): does the answer hold?
 
     python bench/oracle_fly.py [--cases 5:0 10:0 5:1] [--nodes 300] [--feedback lqr|pd]
-                               [--pair fem|physical] [--swing] [--replan S] [--trace-dir DIR]
+                               [--pair fem|fem_bumped|physical] [--swing] [--replan S] [--trace-dir DIR]
     python bench/oracle_fly.py --baseline --cases 2.5:0 5:0     # the project's PD alone
 
 Each case MAGNITUDE:SEED is solved by the oracle (Node 2 -> JEM, nominal, the study's bump of
 that seed) on the pair model `--pair` (fem: the identified parameters of
-config/reduced_models.yaml, the study's; physical: pair_model.PairParams' defaults, the grasp
+config/reduced_models.yaml, the study's; fem_bumped: fitted on bumped flights; physical: pair_model.PairParams' defaults, the grasp
 where the FEM bag is held and bags.yaml's strap figures) and flown: PD on the plan until the
 oracle's window, then its wrench + feedback (lqr: the time-varying LQR on the same model).
 Prints one row per case and appends them to studies/results/oracle/flown_tracked.csv
@@ -30,7 +30,7 @@ def main() -> None:
     ap.add_argument("--cases", nargs="*", default=["5:0", "10:0", "5:1"])
     ap.add_argument("--nodes", type=int, default=300)
     ap.add_argument("--feedback", default="lqr", choices=["lqr", "pd"])
-    ap.add_argument("--pair", default="fem", choices=["fem", "physical"])
+    ap.add_argument("--pair", default="fem", choices=["fem", "fem_bumped", "physical"])
     ap.add_argument("--swing", action="store_true", help="the LQR weights the bag's swing too (SWING_SCALE)")
     ap.add_argument("--replan", type=float, default=0.0, help="s between replans from the measured state (0: none)")
     ap.add_argument("--baseline", action="store_true",
@@ -38,7 +38,7 @@ def main() -> None:
     ap.add_argument("--trace-dir", default="", help="save each flight's per-tick trace (npz) here")
     ap.add_argument("--out", default="studies/results/oracle/flown_tracked.csv")
     a = ap.parse_args()
-    params = pm.load("fem") if a.pair == "fem" else pm.PairParams()
+    params = pm.PairParams() if a.pair == "physical" else pm.load(a.pair)
     leg = so.plan_leg("node2_to_jem_bag")
     for case in a.cases:
         mag, seed = float(case.split(":")[0]), int(case.split(":")[1])

@@ -4,6 +4,8 @@ time U(10, 30) s and direction (astrobee_lab.oracle.solve.bump_of_seed), seeds 0
 
     python studies/oracle_feasibility.py [--seeds 20] [--first-seed 0] [--out studies/results/oracle/feasibility.csv]
     python studies/oracle_feasibility.py --table      # the table over every study file
+    python studies/oracle_feasibility.py --pair fem_bumped --magnitudes 10 5 \
+        --out studies/results/oracle/feasibility_bumped.csv   # the model fitted on bumped flights
 
 Resumable: rows already in the CSV are skipped. Prints the table of docs/results/oracle.md.
 A second process writes feasibility_<letter>.csv: the files astrobee_lab.oracle.load_feasibility
@@ -16,7 +18,9 @@ import csv
 import os
 import statistics
 import time
+from pathlib import Path
 
+from astrobee import config
 from astrobee_control import pair_model as pm
 from astrobee_lab.oracle import solve as so
 from astrobee_lab.oracle.feasibility import study_files
@@ -32,12 +36,18 @@ def main() -> None:
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--out", default="studies/results/oracle/feasibility.csv")
     ap.add_argument("--magnitudes", type=float, nargs="*", default=list(MAGNITUDES))
-    ap.add_argument("--table", action="store_true", help="only print the table of the study files")
+    ap.add_argument("--pair", default="fem", help="the pair parameters (config/reduced_models.yaml "
+                    "`pair:`): fem (the study's), fem_bumped (fitted on bumped flights)")
+    ap.add_argument("--table", action="store_true", help="only print the table of the study files "
+                    "(with --out naming a variant's CSV: that file's)")
     a = ap.parse_args()
-    if a.table:
-        table(*study_files(os.path.dirname(a.out) or "."))
+    study = study_files(os.path.dirname(a.out) or ".")
+    if a.table:                         # a variant's CSV is read alone, the study's files together
+        table(*(study if Path(a.out) in study or not os.path.exists(a.out) else [a.out]))
         return
-    params = pm.load("fem")
+    if a.pair not in (config.load_yaml("reduced_models.yaml").get("pair") or {}):
+        ap.error(f"--pair {a.pair}: no such entry under `pair:` in config/reduced_models.yaml")
+    params = pm.load(a.pair)
     leg = so.plan_leg("node2_to_jem_bag")
     done = set()
     if os.path.exists(a.out):

@@ -308,13 +308,18 @@ def pair_errors(params, windows, horizons=(1.0, 2.0, 5.0), substeps: int = 2) ->
     return out
 
 
-def fit_pair(base, windows, max_nfev: int = 20, substeps: int = 2):
+def fit_pair(base, windows, max_nfev: int = 20, substeps: int = 2, free_bag: bool = False,
+             damping_max: float = 2.0):
     """Least squares of the pair model's joint (log stiffness, log damping per robot axis), the
-    bag's drag and the grasp point on the robot (the bag's grasp point follows from the mean
-    rest offset) on the windows' robot and bag position errors."""
+    bag's drag and the grasp point on the robot on the windows' robot and bag position errors.
+    The bag's grasp point follows from the mean rest offset, or (`free_bag`: swings large
+    enough to pin the pendulum's length, as after a bump) is fitted too. `damping_max` (N m s/rad)
+    bounds the joint's damping: its time constant must stay within the oracle's RK4 steps."""
     from scipy.optimize import least_squares
 
     from . import pair_model as pm
+    if not damping_max > 1e-4:
+        raise ValueError(f"damping_max must be > 1e-4 N m s/rad (the fit's lower bound), got {damping_max}")
     x0s, us, pr, pb, dt = windows
     rest = np.asarray(base.rest_offset())
     x0s = x0s.copy()
@@ -324,7 +329,7 @@ def fit_pair(base, windows, max_nfev: int = 20, substeps: int = 2):
         g = z[7:10]
         return base.with_(stiffness=tuple(np.exp(z[0:3])), damping=tuple(np.exp(z[3:6])),
                           bag_drag=float(np.exp(z[6])), grasp_robot=tuple(g),
-                          grasp_bag=tuple(g - rest))
+                          grasp_bag=tuple(z[10:13] if free_bag else g - rest))
 
     def res(z):
         p = unpack(z)
@@ -338,7 +343,10 @@ def fit_pair(base, windows, max_nfev: int = 20, substeps: int = 2):
     g0 = np.asarray(base.grasp_robot, float)
     lo = np.concatenate([np.full(7, np.log(1e-4)), g0 - 0.1])
     # bounds: a strap's twist, not a clamp (stiffer joints need smaller steps than the oracle's)
-    hi = np.concatenate([np.full(3, np.log(5.0)), np.full(3, np.log(2.0)), [np.log(20.0)], g0 + 0.1])
+    hi = np.concatenate([np.full(3, np.log(5.0)), np.full(3, np.log(damping_max)), [np.log(20.0)], g0 + 0.1])
+    if free_bag:                        # the bag's grasp point within 0.15 m of its start
+        b0 = np.asarray(base.grasp_bag, float)
+        z0, lo, hi = np.concatenate([z0, b0]), np.concatenate([lo, b0 - 0.15]), np.concatenate([hi, b0 + 0.15])
     sol = least_squares(res, np.clip(z0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi), x_scale="jac",
                         max_nfev=max_nfev, diff_step=1e-3)
     return unpack(sol.x)
