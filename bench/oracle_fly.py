@@ -1,7 +1,8 @@
 """Fly the oracle's plans in the FEM simulator (astrobee_lab.oracle.fly): does the answer hold?
 
     python bench/oracle_fly.py [--cases 5:0 10:0 5:1] [--nodes 300] [--feedback lqr|pd]
-                               [--pair fem|fem_bumped|physical] [--swing] [--replan S] [--trace-dir DIR]
+                               [--pair fem|fem_bumped|physical] [--swing] [--replan S] [--margin M]
+                               [--trace-dir DIR]
     python bench/oracle_fly.py --baseline --cases 2.5:0 5:0     # the project's PD alone
 
 Each case MAGNITUDE:SEED is solved by the oracle (Node 2 -> JEM, nominal, the study's bump of
@@ -33,6 +34,8 @@ def main() -> None:
     ap.add_argument("--pair", default="fem", choices=["fem", "fem_bumped", "physical"])
     ap.add_argument("--swing", action="store_true", help="the LQR weights the bag's swing too (SWING_SCALE)")
     ap.add_argument("--replan", type=float, default=0.0, help="s between replans from the measured state (0: none)")
+    ap.add_argument("--margin", type=float, default=so.MARGIN,
+                    help="share of the terminal set's thresholds the plan asks for (flown plans want room)")
     ap.add_argument("--baseline", action="store_true",
                     help="fly the project's PD alone on each case instead (same Flight, no oracle)")
     ap.add_argument("--trace-dir", default="", help="save each flight's per-tick trace (npz) here")
@@ -47,14 +50,14 @@ def main() -> None:
             continue
         b = so.bump_of_seed(seed, mag)
         t0 = time.perf_counter()
-        r = so.solve(leg, params, b)
+        r = so.solve(leg, params, b, margin=a.margin)
         t1 = time.perf_counter()
         flown = fly.fly(r, leg, params, seed, mag, a.nodes, feedback=a.feedback,
-                        trace=bool(a.trace_dir), replan=a.replan,
+                        trace=bool(a.trace_dir), replan=a.replan, margin=a.margin,
                         scale=tracking.SWING_SCALE if a.swing else None)
         trace = flown.pop("trace", None)
         row = {"magnitude": mag, "seed": seed, "bump_time": b.time, "pair": a.pair,
-               "swing_weighted": a.swing, "replan_every": a.replan,
+               "swing_weighted": a.swing, "replan_every": a.replan, "margin": a.margin,
                "oracle_feasible": r.feasible, "oracle_solve_time": round(r.solve_time, 1), **flown,
                "fly_wall_time": round(time.perf_counter() - t1, 1)}
         row["agree"] = row["oracle_feasible"] == row["flown_success"]

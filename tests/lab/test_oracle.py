@@ -55,6 +55,17 @@ def test_oracle_finds_a_planted_move_feasible_without_a_bump():
     assert r.violation["goal"] <= 0.2 and r.violation["rest_speed"] < 0.01
 
 
+def test_oracle_margin_leaves_room_inside_the_terminal_set():
+    """The effort cost ends a plan on the edge of what the NLP asks; a plan to be flown asks
+    for a smaller share of the thresholds (margin) and ends inside it."""
+    p = pm.PairParams()
+    r = so.solve(_leg(np.array([0.0, -0.35, 0.0])), p, None, budget=12.0, x0=_start(p), jit=False,
+                 margin=0.2)
+    assert r.feasible, r.row()
+    assert r.violation["goal"] <= 0.2 * 0.2 + 1e-3
+    assert r.violation["rest_speed"] <= 0.2 * so.REST_SPEED + 1e-4   # default margin: 0.0048
+
+
 def test_oracle_calls_an_impossible_budget_infeasible():
     p = pm.PairParams()
     r = so.solve(_leg(np.array([0.0, -1.5, 0.0])), p, None, budget=4.0, x0=_start(p), jit=False)

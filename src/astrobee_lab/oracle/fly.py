@@ -48,12 +48,13 @@ def measured_state(truth: tuple, bag: Any, bag_offset: np.ndarray) -> np.ndarray
 def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude: float,
         nodes: int = 300, scenario: str = "node2_to_jem_bag", hold: float = 2.0,
         feedback: str = "lqr", pair_inertia=(0.43, 1.51, 1.66), scale: dict | None = None,
-        trace: bool = False, replan: float = 0.0) -> dict[str, Any]:
+        trace: bool = False, replan: float = 0.0, margin: float | None = None) -> dict[str, Any]:
     """Fly the oracle's plan `res` (see the module docstring); a row of what happened (and
     the per-tick trace under "trace" when asked). replan > 0 (lqr only): every `replan` s of
     simulated time the oracle is solved again from the measured pair state (the last plan as
     the guess; the simulation waits for the solver: an idealised replanning MPC) until
-    `hold` + 5 s before the budget ends, and the LQR re-linearised along the new plan."""
+    `hold` + 5 s before the budget ends, and the LQR re-linearised along the new plan; margin:
+    the replans' terminal margin (solve's; None: its default)."""
     from astrobee_lab.flight import Flight
     if feedback not in ("lqr", "pd"):
         raise ValueError(f"feedback must be lqr or pd, got {feedback!r}")
@@ -86,7 +87,8 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
             x = measured_state(fl._truth[name], fl._bag, bag_offset)
             if track is not None and replan > 0 and next_replan <= t < t_end - hold - 5.0:
                 b = res.bump if res.bump is not None and res.bump.time > t else None
-                res = solve(leg, params, b, t0=t, x0=x, guess=res)
+                res = solve(leg, params, b, t0=t, x0=x, guess=res,
+                            **({} if margin is None else {"margin": margin}))
                 replans.append((round(t, 2), res.feasible, round(res.solve_time, 1)))
                 track = tracking.plan(res, params, lim, 1.0 / 62.5, scale)
                 next_replan = t + replan

@@ -156,12 +156,15 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
           grid: float = 0.5, lead: float = 1.0, t0: float | None = None, hold: float = 2.0,
           substep: float = 0.25, max_iter: int = 600, lag: float | None = None,
           x0: np.ndarray | None = None, jit: bool = True,
-          bag_margin: float = BAG_MARGIN, guess: "OracleResult | None" = None) -> OracleResult:
+          bag_margin: float = BAG_MARGIN, guess: "OracleResult | None" = None,
+          margin: float = MARGIN) -> OracleResult:
     """Solve the oracle's problem (module docstring). t0: the window's start (default: `lead`
     s before the bump, or 0 without one); lag overrides params.lag; x0 the start state (default:
     the plan's at t0, planned_state); bag_margin (m) the bag's corners keep from the keep-in
     boxes' faces (the station's walls); guess: an earlier solution over this window (a replan)
-    as the initial guess and for the box assignment instead of the planned leg."""
+    as the initial guess and for the box assignment instead of the planned leg; margin: the
+    share of the terminal set's thresholds the NLP asks for (a plan to be flown wants room: the
+    effort cost otherwise ends it on the NLP's edge)."""
     import casadi as ca
 
     from .model import casadi_points, casadi_step
@@ -221,11 +224,11 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
             opti.subject_to(opti.bounded(corner_box[k, c, :3] - sb[k], pc, corner_box[k, c, 3:] + sb[k]))
         if k in term:
             xk = X[:, k]
-            opti.subject_to(ca.sumsqr(xk[0:3] - leg.goal_position) <= (MARGIN * tol_p) ** 2 + st)
-            opti.subject_to(ca.dot(xk[6:10], gq) ** 2 >= math.cos(MARGIN * tol_a / 2) ** 2 - st)
-            opti.subject_to(ca.sumsqr(xk[3:6]) <= (MARGIN * REST_SPEED) ** 2 + st)
-            opti.subject_to(ca.sumsqr(xk[10:13]) <= (MARGIN * REST_OMEGA) ** 2 + st)
-            opti.subject_to(ca.sumsqr(xk[17:20]) <= (MARGIN * REST_OMEGA) ** 2 + st)
+            opti.subject_to(ca.sumsqr(xk[0:3] - leg.goal_position) <= (margin * tol_p) ** 2 + st)
+            opti.subject_to(ca.dot(xk[6:10], gq) ** 2 >= math.cos(margin * tol_a / 2) ** 2 - st)
+            opti.subject_to(ca.sumsqr(xk[3:6]) <= (margin * REST_SPEED) ** 2 + st)
+            opti.subject_to(ca.sumsqr(xk[10:13]) <= (margin * REST_OMEGA) ** 2 + st)
+            opti.subject_to(ca.sumsqr(xk[17:20]) <= (margin * REST_OMEGA) ** 2 + st)
     opti.minimize(1e3 * ca.sum1(sb) + 1e6 * st + 1e-2 * effort)
     opti.set_initial(X, X0.T)
     U0 = X0[:-1, pm.A] if guess is None else \
