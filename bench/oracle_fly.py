@@ -2,6 +2,7 @@
 
     python bench/oracle_fly.py [--cases 5:0 10:0 5:1] [--nodes 300] [--feedback lqr|pd]
                                [--pair fem|fem_bumped|physical] [--swing] [--replan S] [--margin M]
+                               [--bag-margin M] [--react S]
                                [--trace-dir DIR]
     python bench/oracle_fly.py --baseline --cases 2.5:0 5:0     # the project's PD alone
 
@@ -36,28 +37,40 @@ def main() -> None:
     ap.add_argument("--replan", type=float, default=0.0, help="s between replans from the measured state (0: none)")
     ap.add_argument("--margin", type=float, default=so.MARGIN,
                     help="share of the terminal set's thresholds the plan asks for (flown plans want room)")
+    ap.add_argument("--bag-margin", type=float, default=so.BAG_MARGIN,
+                    help="m the plan keeps the bag's corners off the walls")
+    ap.add_argument("--react", type=float, default=None,
+                    help="s after the bump's end: the bump not foreknown, the oracle solved then from the "
+                         "measured state (fly's react)")
     ap.add_argument("--baseline", action="store_true",
                     help="fly the project's PD alone on each case instead (same Flight, no oracle)")
     ap.add_argument("--trace-dir", default="", help="save each flight's per-tick trace (npz) here")
     ap.add_argument("--out", default="studies/results/oracle/flown_tracked.csv")
+    ap.add_argument("--baseline-out", default="studies/results/oracle/pd_baseline_300.csv")
     a = ap.parse_args()
     params = pm.PairParams() if a.pair == "physical" else pm.load(a.pair)
     leg = so.plan_leg("node2_to_jem_bag")
     for case in a.cases:
         mag, seed = float(case.split(":")[0]), int(case.split(":")[1])
         if a.baseline:
-            print(case, baseline(seed, mag, a.nodes), flush=True)
+            row = baseline(seed, mag, a.nodes)
+            print(case, row, flush=True)
+            _append(a.baseline_out, {"magnitude": mag, "seed": seed, "pd_success": row.pop("success"),
+                                     **{k: round(v, 4) if isinstance(v, float) else v
+                                        for k, v in row.items()}})
             continue
         b = so.bump_of_seed(seed, mag)
         t0 = time.perf_counter()
-        r = so.solve(leg, params, b, margin=a.margin)
+        kw = {"margin": a.margin, "bag_margin": a.bag_margin}
+        r = so.solve(leg, params, b, **kw)
         t1 = time.perf_counter()
         flown = fly.fly(r, leg, params, seed, mag, a.nodes, feedback=a.feedback,
-                        trace=bool(a.trace_dir), replan=a.replan, margin=a.margin,
+                        trace=bool(a.trace_dir), replan=a.replan, solve_kw=kw, react=a.react,
                         scale=tracking.SWING_SCALE if a.swing else None)
         trace = flown.pop("trace", None)
         row = {"magnitude": mag, "seed": seed, "bump_time": b.time, "pair": a.pair,
                "swing_weighted": a.swing, "replan_every": a.replan, "margin": a.margin,
+               "bag_margin": a.bag_margin, "react": a.react,
                "oracle_feasible": r.feasible, "oracle_solve_time": round(r.solve_time, 1), **flown,
                "fly_wall_time": round(time.perf_counter() - t1, 1)}
         row["agree"] = row["oracle_feasible"] == row["flown_success"]
@@ -65,12 +78,17 @@ def main() -> None:
             os.makedirs(a.trace_dir, exist_ok=True)
             np.savez(os.path.join(a.trace_dir, f"trace_{mag:g}_{seed}_{a.pair}_{a.feedback}.npz"), **trace)
         print(row, f"total {time.perf_counter() - t0:.0f} s", flush=True)
-        new = not os.path.exists(a.out)
-        with open(a.out, "a", newline="") as f:
-            w = csv.DictWriter(f, list(row))
-            if new:
-                w.writeheader()
-            w.writerow(row)
+        _append(a.out, row)
+
+
+def _append(path: str, row: dict) -> None:
+    """One row appended to the CSV at `path` (its header written first when it is new)."""
+    new = not os.path.exists(path)
+    with open(path, "a", newline="") as f:
+        w = csv.DictWriter(f, list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)
 
 
 def baseline(seed: int, magnitude: float, nodes: int) -> dict:

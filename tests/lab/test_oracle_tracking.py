@@ -43,6 +43,8 @@ def test_lqr_brings_a_perturbed_pair_back_to_the_plan():
 def test_fly_refuses_an_unknown_feedback():
     with pytest.raises(ValueError, match="feedback"):
         fly.fly(_resting(1.0), so.plan_leg(), pm.load("fem"), 0, 0.0, feedback="mpc")
+    with pytest.raises(ValueError, match="lqr"):
+        fly.fly(_resting(1.0), so.plan_leg(), pm.load("fem"), 0, 5.0, feedback="pd", react=0.5)
 
 
 def test_a_ball_jointed_bags_swing_is_not_reachable_at_first_order():

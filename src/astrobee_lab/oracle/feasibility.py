@@ -5,7 +5,8 @@ Which files count: the study writes `feasibility.csv` and, when split across pro
 `feasibility_<letter>.csv` (feasibility_b.csv, ...): all of those are one model (the `pair: fem`
 parameters of config/reduced_models.yaml, the bag's corners 5 cm off the walls). Any other
 `feasibility_<name>.csv` is a variant of the problem (feasibility_margin0.csv: the bag's corners
-allowed on the walls, an earlier identification) and is not read.
+allowed on the walls, an earlier identification; feasibility_bumped.csv: the `pair: fem_bumped` model
+fitted on bumped flights) and is not read.
 """
 from __future__ import annotations
 

@@ -48,16 +48,23 @@ def measured_state(truth: tuple, bag: Any, bag_offset: np.ndarray) -> np.ndarray
 def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude: float,
         nodes: int = 300, scenario: str = "node2_to_jem_bag", hold: float = 2.0,
         feedback: str = "lqr", pair_inertia=(0.43, 1.51, 1.66), scale: dict | None = None,
-        trace: bool = False, replan: float = 0.0, margin: float | None = None) -> dict[str, Any]:
+        trace: bool = False, replan: float = 0.0, solve_kw: dict | None = None,
+        react: float | None = None) -> dict[str, Any]:
     """Fly the oracle's plan `res` (see the module docstring); a row of what happened (and
     the per-tick trace under "trace" when asked). replan > 0 (lqr only): every `replan` s of
     simulated time the oracle is solved again from the measured pair state (the last plan as
     the guess; the simulation waits for the solver: an idealised replanning MPC) until
-    `hold` + 5 s before the budget ends, and the LQR re-linearised along the new plan; margin:
-    the replans' terminal margin (solve's; None: its default)."""
+    `hold` + 5 s before the budget ends, and the LQR re-linearised along the new plan; solve_kw:
+    keywords of the solves made in flight (margin, bag_margin: as the first plan's). react (s,
+    lqr only): the bump is not foreknown: PD flies until `react` s after the bump's end (as a
+    detector on the bag's state would see it), then the oracle is solved from the measured pair
+    state without a bump (the simulation waits for it, as for a replan); `res` then only gives
+    the window's end."""
     from astrobee_lab.flight import Flight
     if feedback not in ("lqr", "pd"):
         raise ValueError(f"feedback must be lqr or pd, got {feedback!r}")
+    if (react is not None or replan > 0) and feedback != "lqr":
+        raise ValueError("react and replan need the lqr feedback")
     realism = {"disturbances": [{"target": "bag", "magnitude": float(magnitude), "duration": 0.2,
                                  "t_min": 10.0, "t_max": 30.0}]} if magnitude > 0 else None
     t_end = float(res.t[-1])
@@ -78,17 +85,26 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
     corners = bag_corners(leg.bag_size)
     world = fl.sim.world
     contacts, clearance, tail, rows, replans = 0, np.inf, [], [], []
-    next_replan = float(res.t[0]) + replan
+    start = float(res.t[0])
+    solves = []                          # (t, feasible, solve s) of every solve made in flight
+    if react is not None:
+        (pulse,) = fl.sim.disturbance_schedule()
+        start, track = float(pulse["time"]) + float(pulse["duration"]) + float(react), None
+    solve_kw = dict(solve_kw or {})
+    next_replan = start + replan
     while fl.sim.time < t_end - 1e-9:
         t = fl.sim.time
-        if t < res.t[0]:
+        if t < start:
             _, sample = fl.step()
         else:
             x = measured_state(fl._truth[name], fl._bag, bag_offset)
+            if track is None and react is not None:
+                res = solve(leg, params, None, t0=t, x0=x, **solve_kw)
+                solves.append((round(t, 2), res.feasible, round(res.solve_time, 1)))
+                track = tracking.plan(res, params, lim, 1.0 / 62.5, scale)
             if track is not None and replan > 0 and next_replan <= t < t_end - hold - 5.0:
                 b = res.bump if res.bump is not None and res.bump.time > t else None
-                res = solve(leg, params, b, t0=t, x0=x, guess=res,
-                            **({} if margin is None else {"margin": margin}))
+                res = solve(leg, params, b, t0=t, x0=x, guess=res, **solve_kw)
                 replans.append((round(t, 2), res.feasible, round(res.solve_time, 1)))
                 track = tracking.plan(res, params, lim, 1.0 / 62.5, scale)
                 next_replan = t + replan
@@ -124,7 +140,9 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
            "flown_omega": round(float(omega), 4), "flown_contacts": contacts,
            "flown_min_bag_clearance": round(float(clearance), 4),
            "bump_seen": log[0]["force"] if log else None,
-           "replans": len(replans), "replans_feasible": sum(f for _, f, _ in replans)}
+           "replans": len(replans), "replans_feasible": sum(f for _, f, _ in replans),
+           **({"react_at": solves[0][0], "react_feasible": solves[0][1],
+               "react_solve_time": solves[0][2]} if solves else {})}
     if trace:
         out["trace"] = {k: np.array([r[k] for r in rows]) for k in rows[0]} if rows else {}
     return out
