@@ -43,16 +43,12 @@ def pushes(seed: int, duration: float, lim: np.ndarray) -> list[tuple[float, flo
     return out
 
 
-def record(seed: int, nodes: int, duration: float) -> sysid.PairRecording:
-    from astrobee_lab.flight import Flight
-    fl = Flight("node2_to_jem_bag", seed=seed, controller="pd", bag_model="fem",
-                bag_resolution=nodes, state_source="truth", plan=False,
-                task={"time_limit": duration + 10})
-    fl.reset()
+def recorded(fl, until: float, plan=()) -> sysid.PairRecording:
+    """Fly the reset Flight `fl` to sim time `until`, its law's wrench plus the pushes of `plan`
+    ((start, end, body wrench)) boxed per axis, recording each tick's truth and applied wrench."""
     lim = np.concatenate([fl.mode.max_force, fl.mode.max_torque])
-    plan = pushes(seed, duration, lim)
     rows = []
-    while fl.sim.time < duration:
+    while fl.sim.time < until:
         t = fl.sim.time
         add = sum((w for a, b, w in plan if a <= t < b), np.zeros(6))
         p, q, v, w = fl._truth[fl.names[0]]
@@ -62,8 +58,18 @@ def record(seed: int, nodes: int, duration: float) -> sysid.PairRecording:
         fl.step(cmd, mode="replace")
     fl.close()
     t, p, v, q, w, bp, bq, bw, u = (np.array(c, float) for c in zip(*rows))
-    x = sysid.pair_states(p, v, q, w, bq, bw, u)
-    return sysid.PairRecording(t, x, bp, u)
+    return sysid.PairRecording(t, sysid.pair_states(p, v, q, w, bq, bw, u), bp, u)
+
+
+def record(seed: int, nodes: int, duration: float) -> sysid.PairRecording:
+    """PD holding the start pose while `pushes` push (the pushed identification flights)."""
+    from astrobee_lab.flight import Flight
+    fl = Flight("node2_to_jem_bag", seed=seed, controller="pd", bag_model="fem",
+                bag_resolution=nodes, state_source="truth", plan=False,
+                task={"time_limit": duration + 10})
+    fl.reset()
+    return recorded(fl, duration, pushes(seed, duration, np.concatenate([fl.mode.max_force,
+                                                                          fl.mode.max_torque])))
 
 
 def record_bumped(seed: int, nodes: int, magnitude: float, controller: str = "pd",
@@ -79,18 +85,13 @@ def record_bumped(seed: int, nodes: int, magnitude: float, controller: str = "pd
                 task={"time_limit": after + 10})
     fl.reset()
     (pulse,) = fl.sim.disturbance_schedule()
-    bump_end = float(pulse["time"]) + float(pulse["duration"])
-    rows = []
-    while fl.sim.time < after:
-        p, q, v, w = fl._truth[fl.names[0]]
-        b = fl._bag
-        cmd = np.array(fl._pending[fl.names[0]], float)
-        rows.append((fl.sim.time, p, v, q, w, b.position, b.orientation, b.omega, cmd))
-        fl.step(cmd, mode="replace")
-    fl.close()
-    t, p, v, q, w, bp, bq, bw, u = (np.array(c, float) for c in zip(*rows))
-    x = sysid.pair_states(p, v, q, w, bq, bw, u)
-    return sysid.PairRecording(t, x, bp, u), bump_end
+    return recorded(fl, after), float(pulse["time"]) + float(pulse["duration"])
+
+
+def largest_swing(rec: sysid.PairRecording) -> float:
+    """The largest angle (deg) between the bag's frame and the robot's over a recording."""
+    c = np.clip(np.abs(np.sum(rec.x[:, pm.Q_R] * rec.x[:, pm.Q_B], 1)), 0, 1)
+    return float(np.degrees(2 * np.arccos(c)).max())
 
 
 def after_bump(rec: sysid.PairRecording, bump_end: float) -> sysid.PairRecording:
@@ -138,8 +139,7 @@ def main() -> None:
     rigid = fitted.with_(stiffness=(200.0, 200.0, 200.0), damping=(20.0, 20.0, 20.0))
     wheld = sysid.pair_windows(held, 5.0, every=1.0)
     rows = {"pair (strap figures)": base, "pair (fitted)": fitted, "rigid pair (same code, stiff joint)": rigid}
-    swing = max(np.degrees(2 * np.arccos(np.clip(np.abs(np.sum(r.x[:, pm.Q_R] * r.x[:, pm.Q_B], 1)), 0, 1))).max()
-                for r in held)
+    swing = max(largest_swing(r) for r in held)
     print(f"held-out: largest bag swing relative to the robot {swing:.1f} deg")
     print("| model | robot 1 s | bag 1 s | robot 2 s | bag 2 s | robot 5 s | bag 5 s |")
     print("|---|---|---|---|---|---|---|")
@@ -188,8 +188,7 @@ def bumped(nodes: int, write: bool, cache: str, max_nfev: int) -> None:
     print(f"recorded {len(recs)} bumped flights in {time.perf_counter() - t0:.0f} s")
     train = [after_bump(*recs[s]) for s, _ in BUMPED_TRAIN]
     held = [after_bump(*recs[s]) for s, _ in BUMPED_HELD]
-    swing = [float(np.degrees(2 * np.arccos(np.clip(np.abs(np.sum(r.x[:, pm.Q_R] * r.x[:, pm.Q_B], 1)),
-                                                    0, 1))).max()) for r in held]
+    swing = [largest_swing(r) for r in held]
     print("held-out: largest bag swing relative to the robot " + ", ".join(f"{s:.0f}" for s in swing) + " deg")
     t1 = time.perf_counter()
     fitted = sysid.fit_pair(pm.PairParams(), sysid.pair_windows(train, 2.0, every=1.0),

@@ -77,7 +77,9 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
     # the FEM bag's fitted frame against the robot's at the start (the model's rest: aligned)
     q0 = rot.normalize(np.asarray(fl._truth[name][1], float))
     bag_offset = rot.multiply(rot.conjugate(rot.normalize(np.asarray(fl._bag.orientation, float))), q0)
-    track = tracking.plan(res, params, lim, 1.0 / 62.5, scale) if feedback == "lqr" else None
+    # with react the LQR waits for the plan solved after the bump (the foreknown one is not flown)
+    track = tracking.plan(res, params, lim, 1.0 / 62.5, scale) \
+        if feedback == "lqr" and react is None else None
     M = params.robot_mass + params.bag_mass
     J = np.asarray(pair_inertia, float)
     kp, kd = np.asarray(mode.pos_kp, float), np.asarray(mode.vel_kd, float)
@@ -86,10 +88,10 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
     world = fl.sim.world
     contacts, clearance, tail, rows, replans = 0, np.inf, [], [], []
     start = float(res.t[0])
-    solves = []                          # (t, feasible, solve s) of every solve made in flight
+    reacted: dict = {}                   # the solve made after the bump (react)
     if react is not None:
         (pulse,) = fl.sim.disturbance_schedule()
-        start, track = float(pulse["time"]) + float(pulse["duration"]) + float(react), None
+        start = float(pulse["time"]) + float(pulse["duration"]) + float(react)
     solve_kw = dict(solve_kw or {})
     next_replan = start + replan
     while fl.sim.time < t_end - 1e-9:
@@ -100,7 +102,8 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
             x = measured_state(fl._truth[name], fl._bag, bag_offset)
             if track is None and react is not None:
                 res = solve(leg, params, None, t0=t, x0=x, **solve_kw)
-                solves.append((round(t, 2), res.feasible, round(res.solve_time, 1)))
+                reacted = {"react_at": round(t, 2), "react_feasible": res.feasible,
+                           "react_solve_time": round(res.solve_time, 1)}
                 track = tracking.plan(res, params, lim, 1.0 / 62.5, scale)
             if track is not None and replan > 0 and next_replan <= t < t_end - hold - 5.0:
                 b = res.bump if res.bump is not None and res.bump.time > t else None
@@ -141,8 +144,7 @@ def fly(res: OracleResult, leg: Leg, params: pm.PairParams, seed: int, magnitude
            "flown_min_bag_clearance": round(float(clearance), 4),
            "bump_seen": log[0]["force"] if log else None,
            "replans": len(replans), "replans_feasible": sum(f for _, f, _ in replans),
-           **({"react_at": solves[0][0], "react_feasible": solves[0][1],
-               "react_solve_time": solves[0][2]} if solves else {})}
+           **reacted}
     if trace:
         out["trace"] = {k: np.array([r[k] for r in rows]) for k in rows[0]} if rows else {}
     return out
