@@ -149,19 +149,13 @@ def main() -> None:
         print(f"| {name} | " + " | ".join(f"{1000 * e[k]:.1f}" for k in
               ("robot_1s", "bag_1s", "robot_2s", "bag_2s", "robot_5s", "bag_5s")) + " |")
     if a.write:
-        from astrobee import config
-        import yaml
-        path = config.config_dir() / "reduced_models.yaml"
-        data = yaml.safe_load(path.read_text())
-        d = fitted.to_dict()
-        d["identification"] = {"scenario": "node2_to_jem_bag", "grasp": "strap (default)",
-                               "fem_nodes": a.nodes, "train_seeds": [0, 1], "held_out_seeds": [2, 3],
-                               "duration": round(float(recs[0].t[-1] - recs[0].t[0]), 1), "swing_max_deg": round(float(swing), 1),
-                               **{f"held_out_{k}": round(v, 5) for k, v in errs["pair (fitted)"].items()}}
-        data.setdefault("pair", {})["fem"] = d
-        path.write_text(path.read_text().split("\npair:")[0].rstrip() + "\n" +
-                        yaml.safe_dump({"pair": data["pair"]}, sort_keys=False))
-        print("wrote", path)
+        pm.store("fem", fitted, {
+            "scenario": "node2_to_jem_bag", "grasp": "strap (default)", "fem_nodes": a.nodes,
+            "train_seeds": [0, 1], "held_out_seeds": [2, 3],
+            "duration": round(float(recs[0].t[-1] - recs[0].t[0]), 1),
+            "swing_max_deg": round(float(swing), 1),
+            **{f"held_out_{k}": round(v, 5) for k, v in errs["pair (fitted)"].items()}})
+        print("wrote pair: fem: to config/reduced_models.yaml")
 
 
 # (seed, bump N): train, held out; none of the studies' seeds (0-39)
@@ -209,28 +203,14 @@ def bumped(nodes: int, write: bool, cache: str, max_nfev: int) -> None:
         e = errs[name] = sysid.pair_errors(p, wheld, substeps=8 if name.startswith("rigid") else 2)
         print(f"| {name} | " + " | ".join(f"{1000 * e[k]:.1f}" for k in keys) + " |")
     if write:
-        from astrobee import config
-        import yaml
-        path = config.config_dir() / "reduced_models.yaml"
-        data = yaml.safe_load(path.read_text())
-        if list(data)[-1] != "pair":
-            raise SystemExit(f"{path}: `pair:` is not the last section")
-        d = fitted.to_dict()
         e = errs["**pair, fitted on bumped flights** (`pair: fem_bumped`)"]
-        d["identification"] = {"scenario": "node2_to_jem_fem_bag", "grasp": "strap (default)",
-                               "controller": "pd", "fem_nodes": nodes,
-                               "train": [list(r) for r in BUMPED_TRAIN],
-                               "held_out": [list(r) for r in BUMPED_HELD],
-                               "windows_from": "bump end", "damping_max": 0.3,
-                               "swing_max_deg": [round(s, 1) for s in swing],
-                               **{f"held_out_{k}": round(v, 5) for k, v in e.items()}}
-        if "fem_bumped" in (data.get("pair") or {}) and list(data["pair"])[-1] != "fem_bumped":
-            raise SystemExit(f"{path}: `pair: fem_bumped:` is not the last entry; move it there")
-        # appended as the file's last entry (replacing its old text): the comments above stay
-        kept = path.read_text().split("\n  fem_bumped:")[0].rstrip()
-        entry = yaml.safe_dump({"fem_bumped": d}, sort_keys=False)
-        path.write_text(kept + "\n" + "".join("  " + line + "\n" for line in entry.splitlines()))
-        print("wrote", path)
+        pm.store("fem_bumped", fitted, {
+            "scenario": "node2_to_jem_fem_bag", "grasp": "strap (default)", "controller": "pd",
+            "fem_nodes": nodes, "train": [list(r) for r in BUMPED_TRAIN],
+            "held_out": [list(r) for r in BUMPED_HELD], "windows_from": "bump end",
+            "damping_max": 0.3, "swing_max_deg": [round(s, 1) for s in swing],
+            **{f"held_out_{k}": round(v, 5) for k, v in e.items()}})
+        print("wrote pair: fem_bumped: to config/reduced_models.yaml")
 
 
 if __name__ == "__main__":

@@ -20,7 +20,6 @@ import statistics
 import time
 from pathlib import Path
 
-from astrobee import config
 from astrobee_control import pair_model as pm
 from astrobee_lab.oracle import solve as so
 from astrobee_lab.oracle.feasibility import study_files
@@ -45,9 +44,10 @@ def main() -> None:
     if a.table:                         # a variant's CSV is read alone, the study's files together
         table(*(study if Path(a.out) in study or not os.path.exists(a.out) else [a.out]))
         return
-    if a.pair not in (config.load_yaml("reduced_models.yaml").get("pair") or {}):
-        ap.error(f"--pair {a.pair}: no such entry under `pair:` in config/reduced_models.yaml")
-    params = pm.load(a.pair)
+    try:
+        params = pm.load(a.pair)
+    except ValueError as e:
+        ap.error(f"--pair: {e}")
     leg = so.plan_leg("node2_to_jem_bag")
     done = set()
     if os.path.exists(a.out):

@@ -80,14 +80,50 @@ class PairParams:
 
 def load(name: str = "fem") -> PairParams:
     """The identified pair parameters of bag model `name` (config/reduced_models.yaml `pair:`);
-    the defaults when none are recorded."""
+    the defaults when the file records none. ValueError (one line, the recorded names) for a
+    name the file does not have: a misspelled name must not fly on the defaults."""
     from astrobee import config
     try:
         data = config.load_yaml("reduced_models.yaml")
     except config.ConfigError:
         return PairParams()
-    d = (data.get("pair") or {}).get(name)
-    return PairParams() if d is None else PairParams.from_dict(d)
+    section = data.get("pair") or {}
+    if not section:
+        return PairParams()
+    if name not in section:
+        raise ValueError(f"pair model {name!r}: no such entry under `pair:` in "
+                         f"config/reduced_models.yaml (recorded: {', '.join(sorted(section))})")
+    return PairParams.from_dict(section[name])
+
+
+def store(name: str, params: PairParams, identification: dict, path=None) -> None:
+    """Record `params` (with how they were identified) as `pair: <name>:` in
+    config/reduced_models.yaml (or `path`): the entry's old text is replaced where it stands, a
+    new one appended to the section; every other line of the file, comments included, stays."""
+    import yaml
+    from astrobee import config
+    from pathlib import Path
+    path = Path(path) if path is not None else config.config_dir() / "reduced_models.yaml"
+    d = params.to_dict()
+    d["identification"] = identification
+    entry = ["  " + line for line in yaml.safe_dump({name: d}, sort_keys=False).splitlines()]
+    lines = path.read_text().splitlines()
+    if "pair:" not in lines:
+        lines += ["pair:"]
+    top = lines.index("pair:")
+    # the section ends at the next unindented line (a key or a comment), an entry at the next
+    # line indented as it is (the next entry or a comment on it)
+    end = next((i for i in range(top + 1, len(lines)) if lines[i][:1].strip()), len(lines))
+    start = next((i for i in range(top + 1, end) if lines[i] == f"  {name}:"), None)
+    if start is None:
+        stop = start = end
+    else:
+        stop = next((i for i in range(start + 1, end) if lines[i][:2] == "  "
+                     and lines[i][2:3].strip()), end)
+    while stop > start and not lines[stop - 1].strip():       # blank lines stay outside
+        stop -= 1
+    lines[min(start, stop):stop] = entry
+    path.write_text("\n".join(lines) + "\n")
 
 
 # ---- component arithmetic (numpy arrays or CasADi symbols alike) ------------------------------

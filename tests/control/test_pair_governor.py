@@ -187,3 +187,49 @@ def test_clearance_weights_the_route_near_a_wall():
     near, d = bent(towards, {"clearance": 0.3})
     free, _ = bent(towards, {})
     assert d < 0.3 and free > 0.05 and near < 0.5 * free
+
+
+def fly_pair_model(params: dict, planted: float = 0.15, T: float = 20.0) -> np.ndarray:
+    """The fold angle (rad: the bag's direction from the grasp against its rest direction, both
+    in the robot's frame) each tick of a 1 m, T s leg and 5 s after, flown by pair_gov with
+    `params` on the reduced pair model (the strap's bumped-flight fit), the bag trailing and
+    turned `planted` rad about the grasp at the start."""
+    from astrobee_control import pair_model as pm
+    p = pm.load("fem_bumped")
+    g_r, g_b = np.asarray(p.grasp_robot), np.asarray(p.grasp_bag)
+    qb = rot.from_rotvec(np.array([0.0, planted, 0.0]))   # the bag turned about the grasp
+    x = pm.state(np.zeros(3), np.zeros(3), Q, np.zeros(3), qb, np.zeros(3))
+    size = np.array([0.5, 0.42, 0.25])
+    law = make_gov_law(FM, mp.robot(), {**params, "grasp": tuple(g_r)})
+    rest = np.asarray(p.rest_offset())
+    dt = 1.0 / 62.5
+    angles = []
+    for k in range(int((T + 5.0) / dt)):
+        st = State(x[pm.P_R], x[pm.V_R], x[pm.Q_R], x[pm.W_R])
+        pb, vb = pm.bag_centre(x, p)
+        bag = BagObservation(pb, x[pm.Q_B], vb, rot.rotate(x[pm.Q_B], x[pm.W_B]), True,
+                             p.bag_mass, size, "constraint")
+        if k == 0:    # the law's rest direction: the bag as the grasp holds it unturned
+            law.observe_bag(BagObservation(st.position + rest, Q, np.zeros(3), np.zeros(3), True,
+                                           p.bag_mass, size, "constraint"), st)
+            law.update(st, 0.0, dt)
+            law.follow(rest_to_rest(np.zeros(3), np.array([1.0, 0.0, 0.0]), Q, Q, T), 0.0)
+        law.observe_bag(bag, st)
+        out = law.update(st, k * dt, dt).output
+        u = pm.box(np.concatenate([out.force, out.torque]), FM.max_force, FM.max_torque)
+        x = pm.rk4(x, u, None, p, dt)
+        r = rot.rotate_inverse(x[pm.Q_R], pm.bag_centre(x, p)[0] - x[pm.P_R]) - g_r
+        angles.append(float(np.arccos(np.clip(r @ (rest - g_r) / np.linalg.norm(r)
+                                              / np.linalg.norm(rest - g_r), -1, 1))))
+    return np.array(angles)
+
+
+def test_inline_reference_keeps_the_trailing_bag_straight_through_the_braking():
+    """Braking with the bag trailing on its strap makes it an inverted pendulum: held on its
+    route, the robot lets a planted 0.15 rad fold come back through the braking; with the inline
+    reference (no steering) the robot goes where the bag's line is and the fold stays out."""
+    brake = slice(int(10.0 * 62.5), int(20.0 * 62.5))        # the leg's second half
+    held = fly_pair_model({})
+    inline = fly_pair_model({"inline": True, "steer_kp": 0.0, "steer_kd": 0.0})
+    assert held[brake].max() > 0.12, held[brake].max()          # measured 0.16
+    assert inline[brake].max() < 0.02, inline[brake].max()      # measured 0.001

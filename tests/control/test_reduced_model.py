@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from astrobee import config, flight_modes
+from astrobee import rotations as rot
 from astrobee_control import mass as mp
 from astrobee_control import sysid
 from astrobee_control.handle_models import RigidBodyParams, identified_handles, rotate_by
@@ -143,3 +144,69 @@ def test_pair_parameters_are_read_from_one_file():
     assert pm.PairParams.from_dict(p.to_dict()) == p
     with pytest.raises(ValueError, match="unknown key"):
         pm.PairParams.from_dict({"stifness": [1, 1, 1]})
+    with pytest.raises(ValueError, match="recorded: fem, fem_bumped"):
+        pm.load("fem_bumpd")              # a misspelled name does not fly on the defaults
+
+
+def _percussion_point(x, p, pm):
+    """The bag's centre of percussion about the grasp (world): the point a force at the grasp
+    across the strap does not move, I_grasp / (m_b L) from the grasp along it (lateral axis y)."""
+    pb, _ = pm.bag_centre(x, p)
+    grasp = x[pm.P_R] + pm.rotation(x[pm.Q_R]) @ np.asarray(p.grasp_robot)
+    L = float(np.linalg.norm(pb - grasp))
+    lq = (p.bag_inertia[2] + p.bag_mass * L * L) / (p.bag_mass * L)
+    return grasp + lq * (pb - grasp) / L
+
+
+def test_a_force_across_the_strap_swings_the_bag_about_its_percussion_point():
+    """Why a strap-held bag's fold is not taken back by the robot's lateral force (the inline
+    reference of pair_gov): on a ball joint in free fall, pushing the robot across the strap
+    moves it and swings the bag but leaves the bag's centre of percussion where it was; only the
+    strap's tension (a push or pull along the strap, which is across the route once it is
+    folded) moves that point."""
+    from astrobee_control import pair_model as pm
+    p = pm.load("fem_bumped").with_(stiffness=(0.0, 0.0, 0.0), damping=(0.0, 0.0, 0.0))
+
+    def moved(fold: float, force: np.ndarray) -> tuple[float, float]:
+        """(robot's distance moved, percussion point's) after 1 s of `force` (N, world =
+        body) on the robot and 1 s coasting, the bag turned `fold` rad about z."""
+        x = pm.state(np.zeros(3), np.zeros(3), [0, 0, 0, 1.0], np.zeros(3),
+                     rot.from_rotvec(np.array([0.0, 0.0, fold])), np.zeros(3))
+        u = np.zeros((125, 6))
+        u[:63, :3] = force
+        xs = pm.rollout(x, u, 0.016, p)
+        return (float(np.linalg.norm(xs[-1, :3])),
+                float(np.linalg.norm(_percussion_point(xs[-1], p, pm)
+                                     - _percussion_point(x, p, pm))))
+
+    robot, q = moved(0.0, np.array([0.0, 0.3, 0.0]))        # across the straight strap
+    assert robot > 0.03 and q < 0.02 * robot, (robot, q)     # measured 41 mm, 0.5 mm
+    pb, _ = pm.bag_centre(pm.state(np.zeros(3), np.zeros(3), [0, 0, 0, 1.0], np.zeros(3),
+                                   rot.from_rotvec(np.array([0.0, 0.0, 0.3])), np.zeros(3)), p)
+    n = (pb - np.asarray(p.grasp_robot)) / np.linalg.norm(pb - np.asarray(p.grasp_robot))
+    _, q_pushed = moved(0.3, -0.3 * n)                      # along the folded strap
+    assert q_pushed > 10 * q and q_pushed > 0.005, (q_pushed, q)   # measured 20 mm
+
+
+def test_pair_entry_is_stored_in_place(tmp_path):
+    """bench/oracle_sysid.py's one writer: an entry's text is replaced where it stands, a new one
+    appended to the section, and every other line (comments, other entries) stays."""
+    import yaml
+    from astrobee_control import pair_model as pm
+    text = ("# the reduced models\nhandles:\n  fem: {kind: rigid}\n"
+            "pair:\n  # the pushed fit\n  fem:\n    bag_mass: 9.0\n    identification: {a: 1}\n"
+            "  # the bumped fit\n  fem_bumped:\n    bag_mass: 8.0\n\n# trailing words\nafter: 1\n")
+    path = tmp_path / "reduced_models.yaml"
+    path.write_text(text)
+    p = pm.PairParams(bag_mass=11.0)
+    pm.store("fem", p, {"seeds": [0, 1]}, path)
+    pm.store("new", pm.PairParams(bag_mass=12.0), {}, path)
+    out = path.read_text()
+    for kept in ("# the reduced models", "# the pushed fit", "# the bumped fit",
+                 "  fem_bumped:\n    bag_mass: 8.0", "# trailing words\nafter: 1"):
+        assert kept in out, kept
+    data = yaml.safe_load(out)
+    assert list(data["pair"]) == ["fem", "fem_bumped", "new"]
+    assert pm.PairParams.from_dict(data["pair"]["fem"]) == p
+    assert data["pair"]["fem"]["identification"] == {"seeds": [0, 1]}
+    assert data["pair"]["new"]["bag_mass"] == 12.0 and data["after"] == 1
