@@ -233,3 +233,6 @@ def test_inline_reference_keeps_the_trailing_bag_straight_through_the_braking():
     inline = fly_pair_model({"inline": True, "steer_kp": 0.0, "steer_kd": 0.0})
     assert held[brake].max() > 0.12, held[brake].max()          # measured 0.16
     assert inline[brake].max() < 0.02, inline[brake].max()      # measured 0.001
+    capped = fly_pair_model({"inline": True, "steer_kp": 0.0, "steer_kd": 0.0,
+                             "inline_max": 0.0})                # no further off the route than 0
+    np.testing.assert_allclose(capped, held, atol=1e-6)
