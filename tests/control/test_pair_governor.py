@@ -144,6 +144,9 @@ def test_registered():
     ({"clearance": -0.3}, "clearance must be a finite number >= 0"),
     ({"stop_share": 0.0}, "stop_share must be in (0, 1]"),
     ({"track": "bag"}, "track must be one of robot, centre"),
+    ({"lever_from": "centre"}, "lever_from must be one of grasp, bag"),
+    ({"inline": "yes"}, "inline must be true or false"),
+    ({"steer_max": -0.1}, "steer_max must be a finite number >= 0"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
@@ -151,6 +154,23 @@ def test_bad_parameters_one_line(params, words):
     assert words in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(ValueError):
         make_gov_law(FM, mp.robot(), params)
+
+
+def test_lever_from_the_observed_bag_follows_its_fold():
+    """lever_from bag: the force's lever is the pair's centre as the bag is now (a strap-held bag
+    folded below the robot moves it 0.14 m below the x axis), not the grasp's."""
+    folded = np.array([-0.36, -0.03, -0.28])
+    st = State(np.zeros(3), np.zeros(3), Q, np.zeros(3))
+    bag = BagObservation(folded, Q, np.zeros(3), np.zeros(3), True, 10.0,
+                         np.array([0.5, 0.42, 0.25]), "constraint")
+    share = 10.0 / (float(mp.robot().mass) + 10.0)
+    levers = {}
+    for where in ("grasp", "bag"):
+        law = make_gov_law(FM, mp.robot(), {"lever": True, "lever_from": where})
+        law.observe_bag(bag, st)
+        levers[where] = law.pd.figures()[1]
+    np.testing.assert_allclose(levers["bag"], share * folded)
+    np.testing.assert_allclose(levers["grasp"], share * np.asarray(GovConfig().grasp))
 
 
 def test_config_defaults_valid():
