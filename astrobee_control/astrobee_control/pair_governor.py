@@ -24,10 +24,10 @@ on the robot (the route through the hatch is the robot's) and changes three thin
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
-  the turn a route force gives (studies/lever_bag.yaml, with clearance 0.3, strap: 5 N 14/20 on
-  seeds 0-19 and 17/20 on fresh seeds 20-39, no contact, against PD 10/20 and 16/20 and
-  gov_clear 11/20 and 16/20: never worse on a seed, McNemar 0 / 5 against PD over the 40, p =
-  0.06; 7.5 / 10 N 4/20 and 1/20 with 3 and 8 contact flights, PD 3/20 and 1/20 with 1 and 4);
+  the turn a route force gives (studies/lever_bag.yaml, with clearance 0.3, strap, 5 N: 14/20 on
+  seeds 0-19 where it was found, 35/40 on fresh seeds 20-59 against PD's 28/40, McNemar 0 / 7,
+  p = 0.016, no contact; 7.5 / 10 N 4/20 and 1/20 with 3 and 8 contact flights, PD 3/20 and
+  1/20 with 1 and 4);
 - the position loop's point (`track`): the robot's centre (default) or the pair's centre of
   mass (`centre`: the reference carries the bag at its observed body-frame offset, so turning the
   pair about its centre asks no force; with `lever` the allocation then counts the force's torque
