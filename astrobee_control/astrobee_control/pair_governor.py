@@ -96,6 +96,7 @@ from .tracking import CONTROLLING, STOPPING, Tracker
 INERTIAS = ("robot", "pivot", "rigid", "centre")
 LEVER_USES = ("help", "guard")
 TRACKED = ("robot", "centre")
+LEVER_FROM = ("grasp", "bag")
 
 
 @dataclass
@@ -163,8 +164,9 @@ class GovConfig:
                 if v not in LEVER_USES:
                     raise ValueError(f"lever_use must be one of {', '.join(LEVER_USES)}, got {v!r}")
             elif f.name == "lever_from":
-                if v not in ("grasp", "bag"):
-                    raise ValueError(f"lever_from must be one of grasp, bag, got {v!r}")
+                if v not in LEVER_FROM:
+                    raise ValueError(f"lever_from must be one of {', '.join(LEVER_FROM)}, "
+                                     f"got {v!r}")
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
@@ -256,13 +258,11 @@ class GovController:
             inertia = I_r + mu * (g @ g * np.eye(3) - np.outer(g, g))
         else:
             d = np.asarray(self._offset, float)
-            from .mass import box_inertia
             inertia = I_r + box_inertia(m_b, bag.size) + m_b * (d @ d * np.eye(3) - np.outer(d, d))
         return M, lever, inertia * cfg.inertia_scale
 
     def pair_inertia(self) -> np.ndarray:
         """The pair's inertia about its centre of mass as it is now (robot body frame)."""
-        from .mass import box_inertia
         bag = self.bag
         m_r, m_b = float(self.mass.mass), float(bag.mass)
         d = np.asarray(self._offset, float)
@@ -272,7 +272,6 @@ class GovController:
 
     def pair_rate(self, state: State) -> np.ndarray:
         """The pair's angular momentum about its centre over its inertia (body frame, rad/s)."""
-        from .mass import box_inertia
         bag = self.bag
         R = rot.to_matrix(rot.normalize(state.orientation))
         m_r, m_b = float(self.mass.mass), float(bag.mass)
