@@ -1,5 +1,7 @@
 """The demo's legs and per-robot controllers (cargo_transport.generate_nodes, no processes;
 the last test builds the controller node in-process on the test router)."""
+import shutil
+
 import pytest
 import yaml
 
@@ -14,7 +16,7 @@ def nodes(tmp_path, **args):
     return {s.name: s for s in cargo_transport.generate_nodes(ctx)}
 
 
-def test_demo_flies_the_fem_bag_with_pd_then_pair_gov_with_the_same_bump(tmp_path):
+def test_demo_flies_the_fem_bag_with_pd_then_gov_bag_with_the_same_bump(tmp_path):
     legs = [Scenario.load(n) for n in cargo_transport.DEMO_LEGS]
     carrying = [s for s in legs if s.bag is not None]
     assert len(carrying) == 2 and all(s.bag.model == "fem" and s.bag.solver == "fast" for s in carrying)
@@ -26,6 +28,9 @@ def test_demo_flies_the_fem_bag_with_pd_then_pair_gov_with_the_same_bump(tmp_pat
     # the default robot's PD flies the first two legs, queen's pair_gov (its own namespace) the third
     assert "pd_controller_node" in specs and "queen/pair_gov_controller_node" in specs
     assert specs["queen/pair_gov_controller_node"].namespace == "queen"
+    # ... with the last leg's controller_params: gov_bag (studies/lever_bag.yaml)
+    assert params_file(specs["queen/pair_gov_controller_node"]) == GOV_BAG
+    assert params_file(specs["pd_controller_node"]) == {}
     mission = specs["mission"].command
     assert [mission[i + 1] for i, a in enumerate(mission) if a == "--scenario"] == list(cargo_transport.DEMO_LEGS)
     # the PD leg may fail (that is what the demo shows): the pair_gov leg is flown all the same
@@ -43,6 +48,7 @@ def test_controller_argument_applies_to_every_robot(tmp_path):
 
 
 GOV_CLEAR = {"pair_gov": {"lever": True, "clearance": 0.3}}     # studies/lever_clearance.yaml
+GOV_BAG = {"lever": True, "clearance": 0.3, "lever_from": "bag"}  # studies/lever_bag.yaml
 
 
 def params_file(spec) -> dict:
@@ -116,3 +122,55 @@ def test_controller_params_reach_the_law_in_the_node(tmp_path, router_env):
         assert node.law.pd.config.lever is True and node.law.pd.config.clearance == 0.3
     finally:
         node.node.destroy_node()
+
+
+def scenario_file(tmp_path, monkeypatch, name: str, **extra):
+    """A copy of config/ whose scenarios/<name>.yaml is node2_to_jem_fem_bag_gov_bag's with
+    `extra` over it, made the config dir."""
+    config = tmp_path / "config"
+    shutil.copytree(find_config_dir(), config)
+    data = yaml.safe_load((config / "scenarios" / "node2_to_jem_fem_bag_gov_bag.yaml").read_text())
+    (config / "scenarios" / f"{name}.yaml").write_text(yaml.safe_dump({**data, **extra}))
+    monkeypatch.setenv("ASTROBEE_CONFIG_DIR", str(config))
+    return config
+
+
+def test_scenario_controller_params_under_the_file_and_not_for_another_law(tmp_path):
+    """A scenario's controller_params reach its law, under controller_params:=; with
+    controller:= naming another law they are not used."""
+    given = tmp_path / "more.yaml"
+    given.write_text(yaml.safe_dump({"pair_gov": {"clearance": 0.2}}))
+    specs = nodes(tmp_path, scenario="node2_to_jem_fem_bag_gov_bag", controller_params=str(given))
+    assert params_file(specs["queen/pair_gov_controller_node"]) == {**GOV_BAG, "clearance": 0.2}
+    specs = nodes(tmp_path, scenario="node2_to_jem_fem_bag_gov_bag", controller="pd")
+    assert params_file(specs["queen/pd_controller_node"]) == {}
+
+
+@pytest.mark.parametrize("extra, says", [
+    ({"controller_params": {"lever_form": "bag"}},
+     "scenario bad: controller_params: pair_gov has no parameter 'lever_form' (did you mean "
+     "'lever_from'?)"),
+    ({"controller_params": {"lever_from": "robot"}},
+     "scenario bad: controller_params: lever_from must be one of grasp, bag, got 'robot'"),
+    ({"controller_params": [1, 2]}, "scenario bad: controller_params must map parameter names "
+                                    "to values, got [1, 2]"),
+])
+def test_bad_scenario_controller_params_one_line(tmp_path, monkeypatch, extra, says):
+    config = scenario_file(tmp_path, monkeypatch, "bad", **extra)
+    ctx = LaunchContext({"scenario": "bad"}, config, tmp_path / "run", False, 7447)
+    with pytest.raises(LaunchError) as err:
+        cargo_transport.generate_nodes(ctx)
+    assert says in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "run").exists()
+
+
+def test_two_legs_flying_one_law_must_agree_on_its_scenario_params(tmp_path, monkeypatch):
+    """One node per robot and law, so one set of parameters: legs that give the same law other
+    controller_params are refused (one line) before any process starts."""
+    monkeypatch.setattr(cargo_transport, "DEMO_LEGS", ("node2_to_jem_fem_bag_pair_gov",
+                                                       "node2_to_jem_fem_bag_gov_bag"))
+    with pytest.raises(LaunchError) as err:
+        nodes(tmp_path, demo="true")
+    assert str(err.value) == ("scenario node2_to_jem_fem_bag_gov_bag: pair_gov flies with other "
+                              "controller_params than in node2_to_jem_fem_bag_pair_gov: one set "
+                              "of parameters per law")

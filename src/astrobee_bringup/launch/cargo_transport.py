@@ -21,13 +21,16 @@ its share of the bag's mass. video (true | false:
 render one MP4 per leg into the run folder, default: with demo), demo (true: fly DEMO_LEGS
 in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag_bump (the
 FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) with PD, then
-node2_to_jem_fem_bag_pair_gov: the same carry, seed and bump flown by the governed pair law;
-video_compare.mp4 shows the two carries side by side).
+node2_to_jem_fem_bag_gov_bag: the same carry, seed and bump flown by gov_bag, the governed pair
+law with the folded bag's lever and the clearance weight; video_compare.mp4 shows the two carries
+side by side).
 
 Controller parameters: each law's node gets the law's defaults, then config/controllers.yaml's
-section for it (`<law>: {name: value}`), then the section of the file controller_params:=PATH
-names (the same shape; for every robot flying that law), e.g. gov_clear, the governed pair law
-with its lever and clearance weight (studies/lever_clearance.yaml):
+section for it (`<law>: {name: value}`), then the scenario's own `controller_params:
+{name: value}` for the law it names (when no controller:= is given; two legs flying one law
+must agree on them), then the section of the file controller_params:=PATH names (the same
+shape; for every robot flying that law), e.g. gov_clear, the governed pair law with its lever
+and clearance weight (studies/lever_clearance.yaml):
 
     # gov_clear.yaml:  pair_gov: {lever: true, clearance: 0.3}
     astrobee launch cargo_transport scenario:=node2_to_jem_fem_bag_pair_gov \
@@ -71,10 +74,11 @@ from roszen.parameters import coerce, infer_type
 
 
 # no bag (PD); the FEM bag on the strap grasp with a 5 N bump on the bag drawn from the seed,
-# flown by PD and then, the same seed and bump, by the governed pair law (pair_gov)
-DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_pair_gov")
+# flown by PD and then, the same seed and bump, by the governed pair law as gov_bag (pair_gov with
+# the scenario's controller_params: lever, lever_from bag, clearance 0.3; studies/lever_bag.yaml)
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_bag")
 # the same carry by two controllers, side by side in video_compare.mp4 (render_demo_compare)
-DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_pair_gov")
+DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_bag")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
 SAFETY_DEFAULT = "true"
@@ -102,7 +106,7 @@ ARGUMENTS = {
                "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
     "demo": ("false", "fly DEMO_LEGS (no bag; the FEM bag with a 5 N bump by PD, then by "
-                      "pair_gov: the same seed, the same bump), the sim reset between"),
+                      "gov_bag (pair_gov): the same seed, the same bump), the sim reset between"),
     "bag_model": ("", f"scenario override: {' | '.join(BAG_MODELS + (NO_BAG,))}"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
@@ -209,14 +213,18 @@ def read_controller_params(arg: str) -> dict[str, dict[str, Any]]:
     return {kind: dict(section or {}) for kind, section in data.items()}
 
 
-def controller_overrides(ctx: LaunchContext, kinds: set[str]) -> dict[str, dict[str, Any]]:
-    """Each law of `kinds` and of the controller_params file: config/controllers.yaml's section
-    with the file's over it, checked (names, parameter types, the law's own check): law ->
+def controller_overrides(ctx: LaunchContext, kinds: set[str],
+                         scenario_params: dict[str, tuple[str, dict]] | None = None
+                         ) -> dict[str, dict[str, Any]]:
+    """Each law of `kinds` and of the controller_params file: config/controllers.yaml's section,
+    a scenario's `controller_params` over it (scenario_params: law -> (scenario, params)), the
+    file's over both, checked (names, parameter types, the law's own check): law ->
     {name: value}. A bad one is one LaunchError line naming where it came from."""
     site_path = ctx.config_dir / "controllers.yaml"
     site = load_yaml(site_path)
     arg = ctx.arg("controller_params")
     given = read_controller_params(arg) if "controller_params" in ctx.arguments else {}
+    scenario_params = scenario_params or {}
     out = {}
     for kind in sorted(kinds | set(given)):
         law = registry.get(kind)
@@ -224,9 +232,13 @@ def controller_overrides(ctx: LaunchContext, kinds: set[str]) -> dict[str, dict[
         if not isinstance(section, dict):
             raise LaunchError(f"controller {kind}: {site_path}: {kind} must map parameter names "
                               f"to values, got {section!r}")
+        leg, scen = scenario_params.get(kind, ("", {}))
+        section = {**section, **scen}
+        scen = flatten_params(scen)
         mine = flatten_params(given.get(kind, {}))
         for name, value in {**flatten_params(section), **mine}.items():
             where = (f"controller_params {arg}" if name in mine
+                     else f"scenario {leg}: controller_params" if name in scen
                      else f"controller {kind}: {site_path}")
             if name not in law.parameters:
                 near = difflib.get_close_matches(name, list(law.parameters), n=1)
@@ -240,7 +252,8 @@ def controller_overrides(ctx: LaunchContext, kinds: set[str]) -> dict[str, dict[
         try:                            # the law's defaults + the merged overrides, checked
             law.check_params(merged)
         except ValueError as exc:
-            where = f"controller_params {arg}: {kind}" if mine else f"controller {kind}"
+            where = (f"controller_params {arg}: {kind}" if mine
+                     else f"scenario {leg}: controller_params" if scen else f"controller {kind}")
             raise LaunchError(f"{where}: {exc}") from None
         out[kind] = merged
     return out
@@ -278,6 +291,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
     robots: list[str] = []
     shares: dict[str, float] = {}       # robot -> its share of a bag carried by several robots
     kinds: dict[str, str] = {}          # robot -> its controller (a registered law)
+    by_scenario: dict[str, tuple[str, dict]] = {}   # law -> (leg, its scenario's parameters)
     for leg in legs:
         try:
             built = Scenario.load(leg, overrides)
@@ -293,11 +307,20 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
             if kinds.setdefault(r, kind) != kind:
                 raise LaunchError(f"robot {r or '(default)'} flies with {kinds[r]} in one leg and "
                                   f"{kind} in {leg}: one controller per robot")
+        if not controller:              # the scenario's own law flies with its parameters
+            params = built.extra.get("controller_params") or {}
+            if not isinstance(params, dict):
+                raise LaunchError(f"scenario {leg}: controller_params must map parameter names "
+                                  f"to values, got {params!r}")
+            first = by_scenario.setdefault(kind, (leg, params))
+            if first[1] != params:
+                raise LaunchError(f"scenario {leg}: {kind} flies with other controller_params "
+                                  f"than in {first[0]}: one set of parameters per law")
         if built.bag is not None and len(names) > 1 and built.bag.handles == len(names):
             shares.update({r: built.bag.mass / len(names) for r in names})
     # config/controllers.yaml's sections with controller_params' over them, checked; a law of
     # the file no robot flies is checked and left out
-    overrides_by_law = controller_overrides(ctx, set(kinds.values()))
+    overrides_by_law = controller_overrides(ctx, set(kinds.values()), by_scenario)
     ctl_params = {}                     # controller kind -> its parameters file
     for kind in sorted(set(kinds.values())):
         law = registry.get(kind)
@@ -365,7 +388,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         if handover:
             args += ["--handover"] + (["--await-recorder"] if ctx.flag("record", True) else [])
-        if demo:                        # the PD leg is there to fail where pair_gov does not
+        if demo:                        # the PD leg is there to fail where gov_bag does not
             args += ["--keep-going"]
         nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
                               command=["run", "astrobee_bringup", "mission", *args],
