@@ -10,7 +10,10 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   angular deceleration brake_share x the torque limits give on the pair's inertia (`inertia`:
   robot alone, `pivot` robot + bag on the grasp, `rigid` (default) bag fixed to the robot,
   `centre` about the pair's centre) x `inertia_scale`; `momentum` damps the pair's rate
-  (angular momentum / inertia) instead of the robot's;
+  (angular momentum / inertia) instead of the robot's while a segment is followed, so the
+  bag's swing is taken out with the robot's turn; stopping and holding at the goal the law
+  damps `hold_momentum`'s mix (default the robot's own rate: damping the pair's there lets the
+  swinging bag drag the robot round above the verdict's 0.02 rad/s of rest);
 - allocation (`lever: true`): the force's torque through the grasp, lever (m_b / M) g, counts in
   allocation.allocate, torque weighted up with the attitude error, the force weight up with the
   route error (`route_error`); off by default (false = force treated as acting at the centre);
@@ -105,8 +108,11 @@ class GovConfig:
 
     grasp: tuple = (-0.234, 0.0, -0.065)  # m, the grasp point, robot body frame
     inertia: str = "rigid"       # the attitude loop's inertia (module docstring)
-    momentum: float = 0.0        # 0..1: the rate the attitude loop damps: the robot's (0) or
-                                 # the pair's, its angular momentum over its inertia (1)
+    momentum: float = 0.0        # 0..1: the rate the attitude loop damps while a segment is
+                                 # followed: the robot's (0) or the pair's, its angular
+                                 # momentum over its inertia (1)
+    hold_momentum: float = 0.0   # ... and while stopping and holding at the goal (0: the
+                                 # robot's own rate, which damps the bag's swing against it)
     inertia_scale: float = 1.0   # x that inertia (ablation: 0.8 / 1.2)
     brake_share: float = 0.6     # share of the torque limit the rate limit plans to brake with
     lever: bool = False          # the force's torque through the grasp counts in the allocation
@@ -179,8 +185,9 @@ class GovConfig:
         for name in ("inertia_scale", "settle_time", "sigma_rate"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        if not 0 <= self.momentum <= 1:
-            raise ValueError(f"momentum must be in [0, 1], got {self.momentum!r}")
+        for name in ("momentum", "hold_momentum"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)!r}")
         if not 0 < self.brake_share <= 1:
             raise ValueError(f"brake_share must be in (0, 1], got {self.brake_share!r}")
         if not 0 < self.stop_share <= 1:
@@ -413,8 +420,9 @@ class GovController:
         w_des = R.T @ np.asarray(ref.omega, float) + rate_limited(
             e_att, fm.att_kp / fm.omega_kd, alpha_max, float(fm.hard_limit_omega))
         w_fb = w
-        if cfg.momentum > 0 and self.bag is not None and self.bag.mass > 0:
-            w_fb = (1 - cfg.momentum) * w + cfg.momentum * self.pair_rate(state)
+        mix = cfg.momentum if self.following else cfg.hold_momentum
+        if mix > 0 and self.bag is not None and self.bag.mass > 0:
+            w_fb = (1 - mix) * w + mix * self.pair_rate(state)
         al_b = R.T @ np.asarray(ref.alpha, float) + fm.omega_kd * (w_des - w_fb)
         tau_des = I @ al_b + np.cross(w, I @ w)
         if fm.control_enabled:
