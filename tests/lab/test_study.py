@@ -303,3 +303,12 @@ def test_a_huge_grid_is_refused_before_anything_is_built(tmp_path, capsys):
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert peak < 50e6          # bytes: nothing built (a flight spec is ~4 KB)
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[2] / "studies")
+                                        .glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_study_file_loads(path):
+    """Each study file of studies/ parses and names flights (a study written down before its
+    flights must still be the one they were flown from)."""
+    study = load_study(path)
+    assert study.flights and study.name == path.stem
