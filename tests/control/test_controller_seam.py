@@ -83,9 +83,11 @@ def test_hold_law_runs_in_controller_node_through_the_graph(router_env):
         node.create_subscription("astrobee_msgs/msg/FamCommand", "/gnc/ctl/command",
                                  lambda m: commands.append(m.control_mode), 50)
 
-        # lockstep: the sim only advances on the hold law's commands
-        assert testing.spin_until(node, lambda: poses and poses[-1][0] >= 3.0, 90.0, (sim, ctl)), \
-            poses[-1:] or "no pose"
+        # lockstep: the sim only advances on the hold law's commands. Wait for both topics: a
+        # test process starved of CPU may first hear the sim at t >= 3 s, before any command
+        assert testing.spin_until(node, lambda: poses and poses[-1][0] >= 3.0
+                                  and len(commands) >= 10, 90.0, (sim, ctl)), \
+            (poses[-1:] or "no pose", len(commands))
         start = poses[0][1]
         assert float(np.linalg.norm(poses[-1][1] - start)) < 0.01
         assert commands and all(c == 1 for c in commands[-10:])       # MODE_STOP: holding
