@@ -16,7 +16,7 @@ def nodes(tmp_path, **args):
     return {s.name: s for s in cargo_transport.generate_nodes(ctx)}
 
 
-def test_demo_flies_the_fem_bag_with_pd_then_gov_bag_with_the_same_bump(tmp_path):
+def test_demo_flies_the_fem_bag_with_pd_then_gov_mom_with_the_same_bump(tmp_path):
     legs = [Scenario.load(n) for n in cargo_transport.DEMO_LEGS]
     carrying = [s for s in legs if s.bag is not None]
     assert len(carrying) == 2 and all(s.bag.model == "fem" and s.bag.solver == "fast" for s in carrying)
@@ -28,8 +28,8 @@ def test_demo_flies_the_fem_bag_with_pd_then_gov_bag_with_the_same_bump(tmp_path
     # the default robot's PD flies the first two legs, queen's pair_gov (its own namespace) the third
     assert "pd_controller_node" in specs and "queen/pair_gov_controller_node" in specs
     assert specs["queen/pair_gov_controller_node"].namespace == "queen"
-    # ... with the last leg's controller_params: gov_bag (studies/lever_bag.yaml)
-    assert params_file(specs["queen/pair_gov_controller_node"]) == GOV_BAG
+    # ... with the last leg's controller_params: gov_mom (studies/momentum_bag.yaml)
+    assert params_file(specs["queen/pair_gov_controller_node"]) == {**GOV_BAG, "momentum": 1.0}
     assert params_file(specs["pd_controller_node"]) == {}
     mission = specs["mission"].command
     assert [mission[i + 1] for i, a in enumerate(mission) if a == "--scenario"] == list(cargo_transport.DEMO_LEGS)
