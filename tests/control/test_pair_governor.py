@@ -210,6 +210,22 @@ def test_clearance_weights_the_route_near_a_wall():
     assert d < 0.3 and free > 0.05 and near < 0.5 * free
 
 
+SIZE = np.array([0.5, 0.42, 0.25])       # the bag's box (m)
+
+
+def pair_model_tick(law, x: np.ndarray, p, t: float, dt: float) -> np.ndarray:
+    """One 62.5 Hz tick of `law` on the reduced pair model `p`: the robot's state and the bag
+    observed from x, the law's wrench boxed to the limits, x integrated over dt."""
+    from astrobee_control import pair_model as pm
+    st = State(x[pm.P_R], x[pm.V_R], x[pm.Q_R], x[pm.W_R])
+    pb, vb = pm.bag_centre(x, p)
+    law.observe_bag(BagObservation(pb, x[pm.Q_B], vb, rot.rotate(x[pm.Q_B], x[pm.W_B]), True,
+                                   p.bag_mass, SIZE, "constraint"), st)
+    out = law.update(st, t, dt).output
+    u = pm.box(np.concatenate([out.force, out.torque]), FM.max_force, FM.max_torque)
+    return pm.rk4(x, u, None, p, dt)
+
+
 def fly_pair_model(params: dict, planted: float = 0.15, T: float = 20.0) -> np.ndarray:
     """The fold angle (rad: the bag's direction from the grasp against its rest direction, both
     in the robot's frame) each tick of a 1 m, T s leg and 5 s after, flown by pair_gov with
@@ -217,28 +233,21 @@ def fly_pair_model(params: dict, planted: float = 0.15, T: float = 20.0) -> np.n
     turned `planted` rad about the grasp at the start."""
     from astrobee_control import pair_model as pm
     p = pm.load("fem_bumped")
-    g_r, g_b = np.asarray(p.grasp_robot), np.asarray(p.grasp_bag)
+    g_r = np.asarray(p.grasp_robot)
     qb = rot.from_rotvec(np.array([0.0, planted, 0.0]))   # the bag turned about the grasp
     x = pm.state(np.zeros(3), np.zeros(3), Q, np.zeros(3), qb, np.zeros(3))
-    size = np.array([0.5, 0.42, 0.25])
     law = make_gov_law(FM, mp.robot(), {**params, "grasp": tuple(g_r)})
     rest = np.asarray(p.rest_offset())
     dt = 1.0 / 62.5
+    # the law's rest direction: the bag as the grasp holds it unturned
+    st = State(x[pm.P_R], x[pm.V_R], x[pm.Q_R], x[pm.W_R])
+    law.observe_bag(BagObservation(st.position + rest, Q, np.zeros(3), np.zeros(3), True,
+                                   p.bag_mass, SIZE, "constraint"), st)
+    law.update(st, 0.0, dt)
+    law.follow(rest_to_rest(np.zeros(3), np.array([1.0, 0.0, 0.0]), Q, Q, T), 0.0)
     angles = []
     for k in range(int((T + 5.0) / dt)):
-        st = State(x[pm.P_R], x[pm.V_R], x[pm.Q_R], x[pm.W_R])
-        pb, vb = pm.bag_centre(x, p)
-        bag = BagObservation(pb, x[pm.Q_B], vb, rot.rotate(x[pm.Q_B], x[pm.W_B]), True,
-                             p.bag_mass, size, "constraint")
-        if k == 0:    # the law's rest direction: the bag as the grasp holds it unturned
-            law.observe_bag(BagObservation(st.position + rest, Q, np.zeros(3), np.zeros(3), True,
-                                           p.bag_mass, size, "constraint"), st)
-            law.update(st, 0.0, dt)
-            law.follow(rest_to_rest(np.zeros(3), np.array([1.0, 0.0, 0.0]), Q, Q, T), 0.0)
-        law.observe_bag(bag, st)
-        out = law.update(st, k * dt, dt).output
-        u = pm.box(np.concatenate([out.force, out.torque]), FM.max_force, FM.max_torque)
-        x = pm.rk4(x, u, None, p, dt)
+        x = pair_model_tick(law, x, p, k * dt, dt)
         r = rot.rotate_inverse(x[pm.Q_R], pm.bag_centre(x, p)[0] - x[pm.P_R]) - g_r
         angles.append(float(np.arccos(np.clip(r @ (rest - g_r) / np.linalg.norm(r)
                                               / np.linalg.norm(rest - g_r), -1, 1))))
@@ -265,23 +274,15 @@ def hold_with_the_bag_turning(params: dict, T: float = 5.0) -> np.ndarray:
     (0, 0.1, 0.05) rad/s at the start, as a bump leaves it."""
     from astrobee_control import pair_model as pm
     p = pm.load("fem_bumped")
-    g_r = np.asarray(p.grasp_robot)
     x = pm.state(np.zeros(3), np.zeros(3), Q, np.zeros(3), Q, np.array([0.0, 0.1, 0.05]))
-    size = np.array([0.5, 0.42, 0.25])
-    law = make_gov_law(FM, mp.robot(), {**params, "grasp": tuple(g_r)})
-    rest = np.asarray(p.rest_offset())
+    law = make_gov_law(FM, mp.robot(), {**params, "grasp": tuple(p.grasp_robot)})
+    law.observe_bag(BagObservation(np.asarray(p.rest_offset()), Q, np.zeros(3), np.zeros(3), True,
+                                   p.bag_mass, SIZE, "constraint"),
+                    State(np.zeros(3), np.zeros(3), Q, np.zeros(3)))
     dt = 1.0 / 62.5
-    law.observe_bag(BagObservation(rest, Q, np.zeros(3), np.zeros(3), True, p.bag_mass, size,
-                                   "constraint"), State(np.zeros(3), np.zeros(3), Q, np.zeros(3)))
     rates = []
     for k in range(int(T / dt)):
-        st = State(x[pm.P_R], x[pm.V_R], x[pm.Q_R], x[pm.W_R])
-        pb, vb = pm.bag_centre(x, p)
-        law.observe_bag(BagObservation(pb, x[pm.Q_B], vb, rot.rotate(x[pm.Q_B], x[pm.W_B]), True,
-                                       p.bag_mass, size, "constraint"), st)
-        out = law.update(st, k * dt, dt).output
-        x = pm.rk4(x, pm.box(np.concatenate([out.force, out.torque]), FM.max_force,
-                             FM.max_torque), None, p, dt)
+        x = pair_model_tick(law, x, p, k * dt, dt)
         rates.append(float(np.linalg.norm(x[pm.W_R])))
     return np.array(rates)
 
