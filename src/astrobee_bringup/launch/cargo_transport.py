@@ -235,11 +235,11 @@ def controller_overrides(ctx: LaunchContext, kinds: set[str],
                               f"to values, got {section!r}")
         leg, scen = scenario_params.get(kind, ("", {}))
         section = {**section, **scen}
-        scen = flatten_params(scen)
+        leg_names = flatten_params(scen)     # the names the scenario set (errors name it)
         mine = flatten_params(given.get(kind, {}))
         for name, value in {**flatten_params(section), **mine}.items():
             where = (f"controller_params {arg}" if name in mine
-                     else f"scenario {leg}: controller_params" if name in scen
+                     else f"scenario {leg}: controller_params" if name in leg_names
                      else f"controller {kind}: {site_path}")
             if name not in law.parameters:
                 near = difflib.get_close_matches(name, list(law.parameters), n=1)
@@ -254,7 +254,8 @@ def controller_overrides(ctx: LaunchContext, kinds: set[str],
             law.check_params(merged)
         except ValueError as exc:
             where = (f"controller_params {arg}: {kind}" if mine
-                     else f"scenario {leg}: controller_params" if scen else f"controller {kind}")
+                     else f"scenario {leg}: controller_params" if leg_names
+                     else f"controller {kind}")
             raise LaunchError(f"{where}: {exc}") from None
         out[kind] = merged
     return out
