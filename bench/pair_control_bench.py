@@ -137,6 +137,10 @@ def main() -> None:
         pair_tick_times(20 * args.repeats, make_gov_law,
                         {"lever": True, "clearance": 0.3, "lever_from": "bag"}),
         target="   budget 16 ms a tick; target <= 50 ms")
+    row("gov_mom: ... + momentum 1 (CPU)",
+        pair_tick_times(20 * args.repeats, make_gov_law,
+                        {"lever": True, "clearance": 0.3, "lever_from": "bag", "momentum": 1.0}),
+        target="   budget 16 ms a tick; target <= 50 ms")
     ours, ref = allocation_times(20 * args.repeats)
     row("allocation, active set (CPU)", ours, "us")
     row("allocation, scipy lsq_linear bvls (CPU)", ref, "us")
