@@ -258,14 +258,17 @@ class Launcher:
         raise LaunchError(f"router did not listen on port {self.port} within {timeout:.0f} s")
 
     def stop_all(self) -> None:
-        """Stop every live child in three stages: the nodes (reverse start order), then after
-        `stop_grace` s the stop-last ones (the recorder: it gets the nodes' final messages and
-        closes its bag), the router last. Each stage: SIGINT, SIGTERM, SIGKILL, bounded waits."""
+        """Stop every live child in three stages: the nodes one at a time in reverse start order
+        (a client is gone before the node it talks to is signalled, so no controller sees the
+        simulator leave and reports a lost peer), then after `stop_grace` s the stop-last ones
+        (the recorder: it gets the nodes' final messages and closes its bag), the router last.
+        Each node and stage: SIGINT, SIGTERM, SIGKILL, bounded waits."""
         live = [(s, p) for s, p in reversed(self.procs) if p.poll() is None]
         routers = [(s, p) for s, p in live if s.kind == "router"]
         last = [(s, p) for s, p in live if s.kind != "router" and s.stops_last]
         others = [(s, p) for s, p in live if s.kind != "router" and not s.stops_last]
-        self._stop_group(others)
+        for one in others:
+            self._stop_group([one])
         if last and self.stop_grace > 0 and any(s.kind != "router" and not s.stops_last
                                                 for s, _ in self.procs):
             # messages the nodes sent just before exiting may still be on their way

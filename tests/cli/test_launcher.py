@@ -204,10 +204,50 @@ def test_recorder_is_stopped_after_the_nodes(tmp_path):
     assert launcher.run() == 0, out.getvalue()
     assert log.read_text().splitlines() == ["node last words", "recorder stopped"], out.getvalue()
     assert all(p.poll() is not None for _, p in launcher.procs)
-    # with the old single-stage stop the recorder was signalled with the nodes: it would
-    # have written first; an explicit stop_last=False restores that order
+    # the recorder is started first, so it would be stopped last anyway: started after the
+    # node with an explicit stop_last=False, it is an ordinary node and goes first
     log.unlink()
     specs[0].stop_last = False
+    specs[:2] = [specs[1], specs[0]]
     launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
     launcher.run()
     assert log.read_text().splitlines() == ["recorder stopped", "node last words"]
+    # and with stop_last back on, the grace-then-recorder stage still holds in that order
+    log.unlink()
+    specs[1].stop_last = None
+    launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
+    launcher.run()
+    assert log.read_text().splitlines() == ["node last words", "recorder stopped"]
+
+
+_SAYS = """
+import signal, sys, time
+def stop(*_):
+    time.sleep(float(sys.argv[3]))        # work a node finishes after SIGINT
+    open(sys.argv[1], "a").write(sys.argv[2] + " stopped\\n")
+    sys.exit(0)
+signal.signal(signal.SIGINT, stop)
+print("up", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+def test_nodes_stop_one_at_a_time_clients_first(tmp_path):
+    """A node started later (a controller) has exited before the one started before it (the
+    simulator it talks to) is signalled: a slow client never sees its server leave. Signalled
+    together, the quick server would be gone first."""
+    import io
+    import sys
+    log = tmp_path / "order.txt"
+    specs = [NodeSpec("server", required=False,
+                      argv=[sys.executable, "-c", _SAYS, str(log), "server", "0"]),
+             NodeSpec("client", required=False,
+                      argv=[sys.executable, "-c", _SAYS, str(log), "client", "0.4"]),
+             NodeSpec("quitter", required=True, argv=[sys.executable, "-c",
+                                                      "import time; time.sleep(1.0)"])]
+    out = io.StringIO()
+    launcher = Launcher(specs, out=out, colour=False, stop_grace=0.0)
+    assert launcher.run() == 0, out.getvalue()
+    assert log.read_text().splitlines() == ["client stopped", "server stopped"], out.getvalue()
+    assert all(p.poll() is not None for _, p in launcher.procs)
