@@ -164,22 +164,11 @@ exec sleep 60
     assert _all_dead(_pids(p).values()) is True
 
 
-_NODE = """
+_SAYS = """
 import signal, sys, time
 def stop(*_):
-    time.sleep(0.3)                       # a node finishing its work after SIGINT
-    open(sys.argv[1], "a").write("node last words\\n")
-    sys.exit(0)
-signal.signal(signal.SIGINT, stop)
-print("up", flush=True)
-while True:
-    time.sleep(0.05)
-"""
-_RECORDER = """
-import signal, sys, time
-def stop(*_):
-    with open(sys.argv[1], "a") as f:
-        f.write("recorder stopped\\n")
+    time.sleep(float(sys.argv[3]))        # work a node finishes after SIGINT
+    open(sys.argv[1], "a").write(sys.argv[2] + " stopped\\n")
     sys.exit(0)
 signal.signal(signal.SIGINT, stop)
 print("up", flush=True)
@@ -195,14 +184,15 @@ def test_recorder_is_stopped_after_the_nodes(tmp_path):
     import sys
     log = tmp_path / "order.txt"
     specs = [NodeSpec("recorder", kind="recorder", required=False,
-                      argv=[sys.executable, "-c", _RECORDER, str(log)]),
-             NodeSpec("node", required=False, argv=[sys.executable, "-c", _NODE, str(log)]),
+                      argv=[sys.executable, "-c", _SAYS, str(log), "recorder", "0"]),
+             NodeSpec("node", required=False,   # a node finishing its work after SIGINT
+                      argv=[sys.executable, "-c", _SAYS, str(log), "node", "0.3"]),
              NodeSpec("quitter", required=True, argv=[sys.executable, "-c",
                                                       "import time; time.sleep(1.0)"])]
     out = io.StringIO()
     launcher = Launcher(specs, out=out, colour=False, stop_grace=0.2)
     assert launcher.run() == 0, out.getvalue()
-    assert log.read_text().splitlines() == ["node last words", "recorder stopped"], out.getvalue()
+    assert log.read_text().splitlines() == ["node stopped", "recorder stopped"], out.getvalue()
     assert all(p.poll() is not None for _, p in launcher.procs)
     # the recorder is started first, so it would be stopped last anyway: started after the
     # node with an explicit stop_last=False, it is an ordinary node and goes first
@@ -211,26 +201,13 @@ def test_recorder_is_stopped_after_the_nodes(tmp_path):
     specs[:2] = [specs[1], specs[0]]
     launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
     launcher.run()
-    assert log.read_text().splitlines() == ["recorder stopped", "node last words"]
+    assert log.read_text().splitlines() == ["recorder stopped", "node stopped"]
     # and with stop_last back on, the grace-then-recorder stage still holds in that order
     log.unlink()
     specs[1].stop_last = None
     launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
     launcher.run()
-    assert log.read_text().splitlines() == ["node last words", "recorder stopped"]
-
-
-_SAYS = """
-import signal, sys, time
-def stop(*_):
-    time.sleep(float(sys.argv[3]))        # work a node finishes after SIGINT
-    open(sys.argv[1], "a").write(sys.argv[2] + " stopped\\n")
-    sys.exit(0)
-signal.signal(signal.SIGINT, stop)
-print("up", flush=True)
-while True:
-    time.sleep(0.05)
-"""
+    assert log.read_text().splitlines() == ["node stopped", "recorder stopped"]
 
 
 def test_nodes_stop_one_at_a_time_clients_first(tmp_path):
