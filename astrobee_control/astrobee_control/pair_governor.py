@@ -17,7 +17,8 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   (below) + momentum 1, pre-registered fresh seeds on the strap (studies/momentum_bag.yaml):
   7.5 N 32/40 vs PD 14/40 (McNemar 0 / 18, p = 7.6e-6, no contact), 5 N 38/40 vs 28/40
   (p = 0.002), 10 N 17/40 vs 9/40 (3 / 11, p = 0.057; 9 contact flights vs 4); replicated on
-  seeds 60-99: 5 N 39/40 vs 26/40, 10 N 12/40 vs 4/40 (p = 0.021; 12 contact flights vs 4);
+  seeds 60-99: 7.5 N 27/40 vs 11/40 (p = 0.0009; 1 contact flight vs 0), 5 N 39/40 vs 26/40,
+  10 N 12/40 vs 4/40 (p = 0.021; 12 contact flights vs 4);
 - allocation (`lever: true`): the force's torque through the grasp, lever (m_b / M) g, counts in
   allocation.allocate, torque weighted up with the attitude error, the force weight up with the
   route error (`route_error`); off by default (false = force treated as acting at the centre);
