@@ -2,8 +2,10 @@
 death (SIGINT, SIGTERM, SIGKILL escalation), non-zero exit on failure, nothing left running."""
 from __future__ import annotations
 
+import io
 import re
 import signal
+import sys
 import time
 
 import pytest
@@ -177,54 +179,46 @@ while True:
 """
 
 
+def _says(log, name: str, delay: float, **kw) -> NodeSpec:
+    """A node that writes '<name> stopped' to `log` `delay` s after its SIGINT."""
+    return NodeSpec(name, required=False,
+                    argv=[sys.executable, "-c", _SAYS, str(log), name, str(delay)], **kw)
+
+
+def _stop_order(specs: list[NodeSpec], log, stop_grace: float) -> list[str]:
+    """Launch `specs` with a required node that quits after 1 s; the lines the nodes wrote as
+    they were stopped, in order (the log is emptied for the next launch)."""
+    quitter = NodeSpec("quitter", required=True,
+                       argv=[sys.executable, "-c", "import time; time.sleep(1.0)"])
+    out = io.StringIO()
+    launcher = Launcher([*specs, quitter], out=out, colour=False, stop_grace=stop_grace)
+    assert launcher.run() == 0, out.getvalue()
+    assert all(p.poll() is not None for _, p in launcher.procs)
+    lines = log.read_text().splitlines()
+    log.unlink()
+    return lines
+
+
 def test_recorder_is_stopped_after_the_nodes(tmp_path):
     """Shutdown order: every node has exited (and the grace passed) before the recorder gets
     SIGINT, so what the nodes send last reaches the bag."""
-    import io
-    import sys
     log = tmp_path / "order.txt"
-    specs = [NodeSpec("recorder", kind="recorder", required=False,
-                      argv=[sys.executable, "-c", _SAYS, str(log), "recorder", "0"]),
-             NodeSpec("node", required=False,   # a node finishing its work after SIGINT
-                      argv=[sys.executable, "-c", _SAYS, str(log), "node", "0.3"]),
-             NodeSpec("quitter", required=True, argv=[sys.executable, "-c",
-                                                      "import time; time.sleep(1.0)"])]
-    out = io.StringIO()
-    launcher = Launcher(specs, out=out, colour=False, stop_grace=0.2)
-    assert launcher.run() == 0, out.getvalue()
-    assert log.read_text().splitlines() == ["node stopped", "recorder stopped"], out.getvalue()
-    assert all(p.poll() is not None for _, p in launcher.procs)
+    recorder = _says(log, "recorder", 0, kind="recorder")
+    node = _says(log, "node", 0.3)               # a node finishing its work after SIGINT
+    assert _stop_order([recorder, node], log, 0.2) == ["node stopped", "recorder stopped"]
     # the recorder is started first, so it would be stopped last anyway: started after the
     # node with an explicit stop_last=False, it is an ordinary node and goes first
-    log.unlink()
-    specs[0].stop_last = False
-    specs[:2] = [specs[1], specs[0]]
-    launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
-    launcher.run()
-    assert log.read_text().splitlines() == ["recorder stopped", "node stopped"]
+    recorder.stop_last = False
+    assert _stop_order([node, recorder], log, 0.2) == ["recorder stopped", "node stopped"]
     # and with stop_last back on, the grace-then-recorder stage still holds in that order
-    log.unlink()
-    specs[1].stop_last = None
-    launcher = Launcher(specs, out=io.StringIO(), colour=False, stop_grace=0.2)
-    launcher.run()
-    assert log.read_text().splitlines() == ["node stopped", "recorder stopped"]
+    recorder.stop_last = None
+    assert _stop_order([node, recorder], log, 0.2) == ["node stopped", "recorder stopped"]
 
 
 def test_nodes_stop_one_at_a_time_clients_first(tmp_path):
     """A node started later (a controller) has exited before the one started before it (the
     simulator it talks to) is signalled: a slow client never sees its server leave. Signalled
     together, the quick server would be gone first."""
-    import io
-    import sys
     log = tmp_path / "order.txt"
-    specs = [NodeSpec("server", required=False,
-                      argv=[sys.executable, "-c", _SAYS, str(log), "server", "0"]),
-             NodeSpec("client", required=False,
-                      argv=[sys.executable, "-c", _SAYS, str(log), "client", "0.4"]),
-             NodeSpec("quitter", required=True, argv=[sys.executable, "-c",
-                                                      "import time; time.sleep(1.0)"])]
-    out = io.StringIO()
-    launcher = Launcher(specs, out=out, colour=False, stop_grace=0.0)
-    assert launcher.run() == 0, out.getvalue()
-    assert log.read_text().splitlines() == ["client stopped", "server stopped"], out.getvalue()
-    assert all(p.poll() is not None for _, p in launcher.procs)
+    assert _stop_order([_says(log, "server", 0), _says(log, "client", 0.4)], log, 0.0) == \
+        ["client stopped", "server stopped"]
