@@ -87,7 +87,7 @@ pair sideways with ~0.14 N at most without turning it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -95,6 +95,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
+from .corridor_fit import CorridorFit, pair_points
 from .law import BagObservation, Step, carried_reference, check_hold_on_start, config_parameters
 from .mass import MassProperties, box_inertia
 from .pd import MODE_NOMINAL, Output, Reference, State
@@ -124,6 +125,8 @@ class GovConfig:
     lever_use: str = "help"      # with lever: "help" (the force may be bent to make torque,
                                  # allocation.allocate) or "guard" (it only stops opposing a
                                  # saturated attitude torque, allocation.guard)
+    lever_hold: bool = True      # with lever: it counts while stopping and holding at the goal
+                                 # too (false: only while a segment is followed)
     lever_from: str = "grasp"    # the lever's point with `track: robot`: the grasp (the bag
                                  # follows on its joint) or the observed bag ("bag": the pair
                                  # rigid as it is now, a folded bag's centre included)
@@ -134,6 +137,9 @@ class GovConfig:
     attitude_share: float = 3.0  # ... reached at this multiple of the attitude tolerance
     route_error: float = 0.0     # m: the force weight grows as (position error / this) past
                                  # it, so the route wins back over the lever (0: constant)
+    drift_speed: float = 0.0     # m/s: the force weight grows as (the pair's centre's speed off
+                                 # its reference / this)^2 past it, so the bump's momentum is
+                                 # taken out before the lever turns the pair (0: off)
     clearance: float = 0.0       # m: the force weight grows as (this / predicted clearance)^2
                                  # below it: the bag's corners and the robot's faces, each
                                  # carried on by its velocity for the time the force limits
@@ -158,6 +164,13 @@ class GovConfig:
     steer_kd: float = 0.3        # 1/s   route error ...
     steer_max: float = 0.3       # rad: ... through a fold of at most this
     steer_accel: float = 0.002   # m/s^2: along-strap acceleration below which it does not steer
+    fit: float = 0.0             # m: the corridor fit's largest shift of the robot's reference
+                                 # across the route, so the pair as it is now (the folded bag,
+                                 # turning at the pair's rate) keeps off the walls ahead
+                                 # (astrobee_control.corridor_fit; 0: off)
+    fit_horizon: float = 4.0     # s of the plan ahead the fit looks at
+    fit_speed: float = 0.05      # m/s: how fast the shift may move
+    fit_margin: float = 0.1      # m: clearance beyond which a larger shift buys nothing
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
@@ -181,13 +194,13 @@ class GovConfig:
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
-            elif f.name in ("lever", "retime", "inline"):
+            elif f.name in ("lever", "lever_hold", "retime", "inline"):
                 if not isinstance(v, (bool, np.bool_)):
                     raise ValueError(f"{f.name} must be true or false, got {v!r}")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0:
                 raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
-        for name in ("inertia_scale", "settle_time", "sigma_rate"):
+        for name in ("inertia_scale", "settle_time", "sigma_rate", "fit_horizon", "fit_speed"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("momentum", "hold_momentum"):
@@ -237,6 +250,7 @@ class GovController:
                                            # reference)
         self._keep_in = None               # clearance.KeepIn, built on first use
         self.following = False             # a segment is followed (the inline reference is on)
+        self.shift = (np.zeros(3), np.zeros(3))   # the corridor fit's (shift, its velocity)
 
     def reset(self) -> None:
         """Nothing integrates."""
@@ -258,7 +272,7 @@ class GovController:
         M = m_r + m_b
         g = np.asarray(cfg.grasp, float)
         lever = np.zeros(3)
-        if cfg.lever:
+        if cfg.lever and (cfg.lever_hold or self.following):
             lever = (m_b / M) * (np.asarray(self._offset, float)
                                  if cfg.track == "centre" or cfg.lever_from == "bag" else g)
         if cfg.inertia == "robot":
@@ -378,15 +392,21 @@ class GovController:
                 else np.zeros(3)
         return p_ref + shift, v_ref + shift_v
 
+    def walls(self):
+        """The keep-in union (clearance.KeepIn, built on first use) and the robot's half-size."""
+        if self._keep_in is None:
+            from astrobee import config as cfg_files
+            from .clearance import KeepIn
+            self._keep_in = KeepIn(cfg_files.keep_in_boxes())
+            self._robot_half = 0.5 * float(cfg_files.astrobee()["envelope"])
+        return self._keep_in, self._robot_half
+
     def predicted_clearance(self, state: State) -> float:
         """The least clearance (m) of the bag's corners and the robot's faces to the keep-in
         boxes, each point carried on at its velocity for the time a stop takes at stop_share of
         the smallest force limit on the pair's mass (astrobee_control.clearance)."""
-        from astrobee import config as cfg_files
-        from .clearance import CUBE, KeepIn
-        if self._keep_in is None:
-            self._keep_in = KeepIn(cfg_files.keep_in_boxes())
-            self._robot_half = 0.5 * float(cfg_files.astrobee()["envelope"])
+        from .clearance import CUBE
+        self.walls()
         bag = self.bag
         M = float(self.mass.mass) + float(bag.mass)
         a = self.config.stop_share * float(np.min(self.flight_mode.max_force)) / M
@@ -408,6 +428,9 @@ class GovController:
         R = rot.to_matrix(q)
         w = np.asarray(state.omega, float)
         M, lever, I = self.figures()
+        if cfg.fit > 0:
+            ref = replace(ref, position=np.asarray(ref.position, float) + self.shift[0],
+                          velocity=np.asarray(ref.velocity, float) + self.shift[1])
         e_p = np.asarray(ref.position, float) - np.asarray(state.position, float)
         e_v = np.asarray(ref.velocity, float) - np.asarray(state.velocity, float)
         ec_p, ec_v = e_p, e_v
@@ -436,6 +459,9 @@ class GovController:
             w_f = 1.0
             if cfg.route_error > 0:
                 w_f = max(1.0, float(np.linalg.norm(e_p)) / cfg.route_error)
+            if cfg.drift_speed > 0 and self.bag is not None and self.bag.mass > 0:
+                v_off = float(np.linalg.norm(self.centre_errors(state, ref, R)[1]))
+                w_f = max(w_f, (v_off / cfg.drift_speed) ** 2)
             if cfg.clearance > 0 and cfg.lever and cfg.lever_use == "help" \
                     and self.bag is not None and self.bag.mass > 0:   # w_f weighs only the lever
                 d = self.predicted_clearance(state)
@@ -472,6 +498,7 @@ class GovLaw(Tracker):
         self.sigma = 1.0
         self._last = None
         self._t0 = 0.0
+        self._fit: CorridorFit | None = None
 
     def observe_bag(self, bag: BagObservation | None, robot: State | None) -> None:
         self.carrying = bag is not None and bag.attached and robot is not None
@@ -490,9 +517,35 @@ class GovLaw(Tracker):
                    ramp(float(np.linalg.norm(state.omega)), cfg.rate_slow, cfg.rate_stop),
                    ramp(self.pd.swing_speed, cfg.swing_slow, cfg.swing_stop))
 
+    def fit_shift(self, state: State, now: float) -> None:
+        """The corridor fit's shift for this tick: decided over the plan ahead while a segment
+        is followed with the bag held, returned to zero otherwise (corridor_fit)."""
+        pd, cfg = self.pd, self.config
+        if self._fit is None:
+            keep_in, half = pd.walls()
+            self._fit = CorridorFit(keep_in, half, cfg.fit, cfg.fit_horizon, cfg.fit_speed,
+                                    cfg.fit_margin)
+        fit, bag = self._fit, pd.bag
+        if pd.following and bag is not None and bag.mass > 0:
+            clock = self.progress if self.config.retime else now
+            route = np.array([self.traj.sample(min(clock + t, self.traj.end_time)).position
+                              for t in fit.times])
+            p = np.asarray(state.position, float)
+            points = pair_points(p, bag.position, rot.to_matrix(rot.normalize(bag.orientation)),
+                                 bag.size)
+            m_r, m_b = float(pd.mass.mass), float(bag.mass)
+            centre = (m_b / (m_r + m_b)) * (np.asarray(bag.position, float) - p)
+            rate = rot.to_matrix(rot.normalize(state.orientation)) @ pd.pair_rate(state)
+            fit.decide(now, route, points, centre, rate)
+        else:
+            fit.release()
+        pd.shift = fit.advance(now)
+
     def update(self, state: State, now: float, dt: float) -> Step:
         """One tick; while a segment is followed, the reference runs on the progress clock."""
         self.pd.following = self.state == CONTROLLING and self.traj is not None
+        if self.config.fit > 0:
+            self.fit_shift(state, now)
         if not (self.config.retime and self.state == CONTROLLING and self.traj is not None):
             return super().update(state, now, dt)
         traj = self.traj
