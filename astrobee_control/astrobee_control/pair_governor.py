@@ -29,6 +29,16 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   the force weight grows as (clearance / d)^2 where d, the least clearance of the bag's corners
   and the robot's faces once each is carried on by its velocity for the stop the force limits
   allow (stop_share of the smallest), falls below it (astrobee_control.clearance);
+- `fit` (m, the corridor fit): the robot's reference is shifted across the route, at most `fit`
+  and at `fit_speed`, by the shift that keeps the pair as it is now (the bag's corners where the
+  strap holds them, turned on at the pair's rate about its centre) farthest from the walls over
+  the plan's next `fit_horizon` s (astrobee_control.corridor_fit). Traced at 10 N (seeds 1, 3)
+  gov_mom's contacts came with the robot within 1 cm of its route: the strap held the bag
+  folded 0.4 m below it and the robot carried it into the JEM hatch's floor;
+- `drift_speed` / `hold_drift_speed` (m/s): the force weight grows as (the pair's centre's
+  speed off its reference / this)^2, along the route / at the goal, so a bump's momentum is
+  braked before the lever turns the pair (the lever's torque about the centre is r x F: turning
+  the pair with it moves the centre);
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
@@ -125,8 +135,6 @@ class GovConfig:
     lever_use: str = "help"      # with lever: "help" (the force may be bent to make torque,
                                  # allocation.allocate) or "guard" (it only stops opposing a
                                  # saturated attitude torque, allocation.guard)
-    lever_hold: bool = True      # with lever: it counts while stopping and holding at the goal
-                                 # too (false: only while a segment is followed)
     lever_from: str = "grasp"    # the lever's point with `track: robot`: the grasp (the bag
                                  # follows on its joint) or the observed bag ("bag": the pair
                                  # rigid as it is now, a folded bag's centre included)
@@ -140,6 +148,11 @@ class GovConfig:
     drift_speed: float = 0.0     # m/s: the force weight grows as (the pair's centre's speed off
                                  # its reference / this)^2 past it, so the bump's momentum is
                                  # taken out before the lever turns the pair (0: off)
+    hold_drift_speed: float = 0.0  # ... and while stopping and holding at the goal
+    hold_error: float = 0.0      # m: the position error the loop sees while stopping and holding
+                                 # is capped at this, so a pair far off its goal comes back at
+                                 # ~ Kp/Kd x this with a small force, whose torque about the
+                                 # pair's centre the attitude loop can hold (0: no cap)
     clearance: float = 0.0       # m: the force weight grows as (this / predicted clearance)^2
                                  # below it: the bag's corners and the robot's faces, each
                                  # carried on by its velocity for the time the force limits
@@ -194,7 +207,7 @@ class GovConfig:
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
-            elif f.name in ("lever", "lever_hold", "retime", "inline"):
+            elif f.name in ("lever", "retime", "inline"):
                 if not isinstance(v, (bool, np.bool_)):
                     raise ValueError(f"{f.name} must be true or false, got {v!r}")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
@@ -272,7 +285,7 @@ class GovController:
         M = m_r + m_b
         g = np.asarray(cfg.grasp, float)
         lever = np.zeros(3)
-        if cfg.lever and (cfg.lever_hold or self.following):
+        if cfg.lever:
             lever = (m_b / M) * (np.asarray(self._offset, float)
                                  if cfg.track == "centre" or cfg.lever_from == "bag" else g)
         if cfg.inertia == "robot":
@@ -440,6 +453,10 @@ class GovController:
             ec_v = v_in - np.asarray(state.velocity, float)
         elif cfg.track == "centre" and self.bag is not None:
             ec_p, ec_v = self.centre_errors(state, ref, R)
+        if cfg.hold_error > 0 and not self.following:
+            size = float(np.linalg.norm(ec_p))
+            if size > cfg.hold_error:
+                ec_p = ec_p * (cfg.hold_error / size)
         a_w = np.asarray(ref.accel, float) + fm.pos_kp * ec_p + fm.vel_kd * ec_v
         f_des = R.T @ (M * a_w)
         e_att = rot.attitude_error(q, ref.orientation)
@@ -459,9 +476,10 @@ class GovController:
             w_f = 1.0
             if cfg.route_error > 0:
                 w_f = max(1.0, float(np.linalg.norm(e_p)) / cfg.route_error)
-            if cfg.drift_speed > 0 and self.bag is not None and self.bag.mass > 0:
+            drift = cfg.drift_speed if self.following else cfg.hold_drift_speed
+            if drift > 0 and self.bag is not None and self.bag.mass > 0:
                 v_off = float(np.linalg.norm(self.centre_errors(state, ref, R)[1]))
-                w_f = max(w_f, (v_off / cfg.drift_speed) ** 2)
+                w_f = max(w_f, (v_off / drift) ** 2)
             if cfg.clearance > 0 and cfg.lever and cfg.lever_use == "help" \
                     and self.bag is not None and self.bag.mass > 0:   # w_f weighs only the lever
                 d = self.predicted_clearance(state)

@@ -148,6 +148,12 @@ def test_registered():
     ({"lever_from": "centre"}, "lever_from must be one of grasp, bag"),
     ({"inline": "yes"}, "inline must be true or false"),
     ({"steer_max": -0.1}, "steer_max must be a finite number >= 0"),
+    ({"fit": -0.3}, "fit must be a finite number >= 0"),
+    ({"fit_horizon": 0.0}, "fit_horizon must be > 0"),
+    ({"fit_speed": 0.0}, "fit_speed must be > 0"),
+    ({"fit_margin": float("nan")}, "fit_margin must be a finite number >= 0"),
+    ({"drift_speed": -0.02}, "drift_speed must be a finite number >= 0"),
+    ({"hold_drift_speed": -1.0}, "hold_drift_speed must be a finite number >= 0"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
