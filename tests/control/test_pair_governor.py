@@ -303,3 +303,54 @@ def test_holding_at_the_goal_damps_the_robots_own_rate():
     pair = hold_with_the_bag_turning({**gov_mom, "hold_momentum": 1.0})
     assert own.max() < 0.005, own.max()           # measured 0.0005
     assert pair.max() > 0.03, pair.max()          # measured 0.04
+
+
+def holding_force(params: dict, v: float) -> np.ndarray:
+    """The force of the law holding the goal 2 m ahead (+x) of the pair, which moves towards it
+    at v m/s (the bag carried along)."""
+    law = make_gov_law(FM, mp.robot(), {"lever": True, "lever_from": "bag", **params})
+    st = State(np.zeros(3), np.array([v, 0.0, 0.0]), Q, np.zeros(3))
+    law.observe_bag(bag_at(st), st)
+    law.update(State(np.array([2.0, 0, 0]), np.zeros(3), Q, np.zeros(3)), 0.0, 0.016)  # holds
+    law.observe_bag(bag_at(st), st)
+    return np.asarray(law.update(st, 0.016, 0.016).output.force)
+
+
+def test_hold_error_brings_a_far_pair_back_slowly():
+    """`hold_error`: 2 m off the goal, the position loop sees at most this error, so the pair
+    comes back at ~ Kp / Kd x hold_error (0.1 m/s for 0.2 m) with no force once it moves at
+    that speed; uncapped the loop is still pushing at its limit (2 m asks for ~1 m/s)."""
+    assert np.linalg.norm(holding_force({"hold_error": 0.2}, 0.1)) < 1e-9
+    assert holding_force({}, 0.1)[0] == pytest.approx(FM.max_force[0])
+    # within the cap nothing changes
+    near = {"hold_error": 5.0}
+    np.testing.assert_allclose(holding_force(near, 0.1), holding_force({}, 0.1))
+
+
+def test_drift_speed_keeps_the_force_on_the_route_while_the_pair_drifts():
+    """`drift_speed`: with the pair turned (the lever wants the force) and its centre drifting
+    off the reference at 0.1 m/s, the force is bent from the route's wanted force less than
+    without the weight, the less the smaller drift_speed; with no drift it does nothing."""
+    q_turned = rot.from_rotvec(np.array([0.0, 0.6, 0.0]))
+
+    def bent(v: np.ndarray, params: dict) -> float:
+        st = State(np.zeros(3), v, q_turned, np.zeros(3))
+        ref = Reference(np.array([0.0, 0.0, 0.02]), np.zeros(3), orientation=Q)
+        law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
+        law.observe_bag(BagObservation(rot.rotate(q_turned, OFFSET), q_turned, v, np.zeros(3),
+                                       True, 10.0, np.array([0.5, 0.42, 0.25]), "fem"), st)
+        law.pd.following = True
+        plain = make_gov_law(FM, mp.robot(), {})
+        plain.observe_bag(law.pd.bag, st)
+        want = plain.pd.step(st, ref, 0.016).force
+        return float(np.linalg.norm(law.pd.step(st, ref, 0.016).force - want))
+
+    drifting = np.array([0.0, 0.1, 0.0])
+    assert bent(np.zeros(3), {"drift_speed": 0.03}) == pytest.approx(bent(np.zeros(3), {}))
+    free = bent(drifting, {})
+    weighted = bent(drifting, {"drift_speed": 0.03})
+    assert free > 0.05 and weighted < 0.6 * free                  # measured 0.32 vs 0.58 N
+    assert bent(drifting, {"drift_speed": 0.01}) < weighted
+    # at the goal only hold_drift_speed weighs
+    law_free = bent(drifting, {"hold_drift_speed": 0.03})
+    assert law_free == pytest.approx(free)
