@@ -34,7 +34,15 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   strap holds them, turned on at the pair's rate about its centre) farthest from the walls over
   the plan's next `fit_horizon` s (astrobee_control.corridor_fit). Traced at 10 N (seeds 1, 3)
   gov_mom's contacts came with the robot within 1 cm of its route: the strap held the bag
-  folded 0.4 m below it and the robot carried it into the JEM hatch's floor;
+  folded 0.4 m below it and the robot carried it into the JEM hatch's floor. gov_fit = gov_mom +
+  fit 0.3 (studies/corridor_fit.yaml, pre-registered): 10 N on seeds 100-139 17/40 vs PD 4/40
+  (McNemar 1 / 14, p = 0.00098), 7 contact flights vs 5;
+- `hold_error` (m): the position error the loop sees while stopping and holding is capped, so a
+  pair that arrives past its goal comes back at ~ Kp/Kd x this with a small force; uncapped, the
+  saturated force's torque about the pair's centre (~0.1 N m) spins the pair up again at the goal
+  against the 0.033 N m of pitch torque. gov_hold = gov_fit + hold_error 0.2: 10 N on seeds
+  140-179 16/40 vs PD 6/40 (p = 0.021; 7 contact flights vs 5), 7.5 N on 100-139 24/40 vs
+  6/40 (p = 4e-5; 8 vs 1);
 - `drift_speed` / `hold_drift_speed` (m/s): the force weight grows as (the pair's centre's
   speed off its reference / this)^2, along the route / at the goal, so a bump's momentum is
   braked before the lever turns the pair (the lever's torque about the centre is r x F: turning
