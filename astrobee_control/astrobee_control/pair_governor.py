@@ -113,6 +113,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
+from .clearance import CUBE, KeepIn
 from .corridor_fit import CorridorFit, pair_points
 from .law import BagObservation, Step, carried_reference, check_hold_on_start, config_parameters
 from .mass import MassProperties, box_inertia
@@ -413,11 +414,10 @@ class GovController:
                 else np.zeros(3)
         return p_ref + shift, v_ref + shift_v
 
-    def walls(self):
-        """The keep-in union (clearance.KeepIn, built on first use) and the robot's half-size."""
+    def walls(self) -> tuple[KeepIn, float]:
+        """The keep-in union (built on first use) and the robot's half-size (m)."""
         if self._keep_in is None:
             from astrobee import config as cfg_files
-            from .clearance import KeepIn
             self._keep_in = KeepIn(cfg_files.keep_in_boxes())
             self._robot_half = 0.5 * float(cfg_files.astrobee()["envelope"])
         return self._keep_in, self._robot_half
@@ -426,7 +426,6 @@ class GovController:
         """The least clearance (m) of the bag's corners and the robot's faces to the keep-in
         boxes, each point carried on at its velocity for the time a stop takes at stop_share of
         the smallest force limit on the pair's mass (astrobee_control.clearance)."""
-        from .clearance import CUBE
         self.walls()
         bag = self.bag
         M = float(self.mass.mass) + float(bag.mass)
