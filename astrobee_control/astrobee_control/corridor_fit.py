@@ -4,7 +4,7 @@ After a bump the strap holds the bag folded, below or beside the robot (a 10 N b
 ~0.4 m under the robot's x axis and keeps it there), and the pair may be turning. A robot held
 on its route then carries the bag into the hatch's edge although the robot itself clears it
 (traced: seeds 1 and 3 at 10 N, the bag's first contact on the hatch floor at the entrance with
-the robot within 1 cm of its route). The fit moves the robot's reference across the route by the
+the robot within 4 cm of its route). The fit moves the robot's reference across the route by the
 shift that keeps the pair's points (the bag's corners, the robot's centre less its half-size),
 carried along the plan for the next `horizon` seconds and turned on with the pair's angular
 rate about its centre of mass, farthest from the keep-in boxes' walls:
