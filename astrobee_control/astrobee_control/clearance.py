@@ -21,6 +21,12 @@ from astrobee.station import passage_boxes
 CUBE = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
+def box_corners(centre: np.ndarray, rotation: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """The 8 corners (8 x 3) of a box of `size` at `centre`, its axes turned by `rotation`."""
+    return np.asarray(centre, float) + (CUBE * (0.5 * np.asarray(size, float))) @ \
+        np.asarray(rotation, float).T
+
+
 class KeepIn:
     """The keep-in union (keep-in boxes + passage boxes) as signed-distance queries."""
 

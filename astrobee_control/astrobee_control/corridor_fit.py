@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .clearance import CUBE, KeepIn
+from astrobee import rotations as rot
+
+from .clearance import KeepIn, box_corners
 
 GRID = 9            # shifts per axis across the route (odd: the grid holds zero)
 PENALTY = 0.05      # m of clearance a metre of shift costs (ties go to the smaller shift)
@@ -27,13 +29,7 @@ PENALTY = 0.05      # m of clearance a metre of shift costs (ties go to the smal
 
 def rotation(w: np.ndarray, t: float) -> np.ndarray:
     """The rotation matrix of turning at the constant rate w (rad/s, world) for t seconds."""
-    v = np.asarray(w, float) * t
-    a = float(np.linalg.norm(v))
-    if a < 1e-9:
-        return np.eye(3)
-    k = v / a
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
+    return rot.to_matrix(rot.from_rotvec(np.asarray(w, float) * t))
 
 
 def across(direction: np.ndarray) -> np.ndarray | None:
@@ -53,8 +49,7 @@ def pair_points(robot: np.ndarray, bag: np.ndarray, bag_rot: np.ndarray, bag_siz
                 ) -> np.ndarray:
     """The pair's points relative to the robot's centre (world frame): the robot's centre first,
     then the bag's 8 corners."""
-    corners = np.asarray(bag, float) + (CUBE * (0.5 * np.asarray(bag_size, float))) @ \
-        np.asarray(bag_rot, float).T
+    corners = box_corners(bag, bag_rot, bag_size)
     return np.vstack([np.zeros(3), corners - np.asarray(robot, float)])
 
 
@@ -102,10 +97,14 @@ class CorridorFit:
         self._decided = -np.inf
         self._last = None
 
+    def due(self, now: float) -> bool:
+        """A decision is due (one per period)."""
+        return now - self._decided >= self.period
+
     def decide(self, now: float, route: np.ndarray, points: np.ndarray, centre: np.ndarray,
                rate: np.ndarray) -> None:
         """A new target shift, if a decision is due (route at self.times from now)."""
-        if now - self._decided < self.period:
+        if not self.due(now):
             return
         self._decided = now
         self.target, self.least = best_shift(self.keep_in, route, self.times, points, centre,

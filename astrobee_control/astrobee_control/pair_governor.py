@@ -113,7 +113,7 @@ from astrobee import rotations as rot
 from astrobee.flight_modes import FlightMode
 
 from . import allocation
-from .clearance import CUBE, KeepIn
+from .clearance import KeepIn, box_corners
 from .corridor_fit import CorridorFit, pair_points
 from .law import BagObservation, Step, carried_reference, check_hold_on_start, config_parameters
 from .mass import MassProperties, box_inertia
@@ -431,7 +431,7 @@ class GovController:
         M = float(self.mass.mass) + float(bag.mass)
         a = self.config.stop_share * float(np.min(self.flight_mode.max_force)) / M
         R_b = rot.to_matrix(rot.normalize(bag.orientation))
-        corners = np.asarray(bag.position, float) + (CUBE * (0.5 * np.asarray(bag.size))) @ R_b.T
+        corners = box_corners(bag.position, R_b, bag.size)
         v_b, v_r = np.asarray(bag.velocity, float), np.asarray(state.velocity, float)
         p_r = np.asarray(state.position, float)
         # now and at the stop (v t / 2, t = |v| / a), the bag's corners and the robot's centre in
@@ -552,16 +552,17 @@ class GovLaw(Tracker):
                                     cfg.fit_margin)
         fit, bag = self._fit, pd.bag
         if pd.following and bag is not None and bag.mass > 0:
-            clock = self.progress if self.config.retime else now
-            route = np.array([self.traj.sample(min(clock + t, self.traj.end_time)).position
-                              for t in fit.times])
-            p = np.asarray(state.position, float)
-            points = pair_points(p, bag.position, rot.to_matrix(rot.normalize(bag.orientation)),
-                                 bag.size)
-            m_r, m_b = float(pd.mass.mass), float(bag.mass)
-            centre = (m_b / (m_r + m_b)) * (np.asarray(bag.position, float) - p)
-            rate = rot.to_matrix(rot.normalize(state.orientation)) @ pd.pair_rate(state)
-            fit.decide(now, route, points, centre, rate)
+            if fit.due(now):                  # the inputs only when a decision is due (5 Hz)
+                clock = self.progress if self.config.retime else now
+                route = np.array([self.traj.sample(min(clock + t, self.traj.end_time)).position
+                                  for t in fit.times])
+                p = np.asarray(state.position, float)
+                points = pair_points(p, bag.position,
+                                     rot.to_matrix(rot.normalize(bag.orientation)), bag.size)
+                m_r, m_b = float(pd.mass.mass), float(bag.mass)
+                centre = (m_b / (m_r + m_b)) * (np.asarray(bag.position, float) - p)
+                rate = rot.to_matrix(rot.normalize(state.orientation)) @ pd.pair_rate(state)
+                fit.decide(now, route, points, centre, rate)
         else:
             fit.release()
         pd.shift = fit.advance(now)

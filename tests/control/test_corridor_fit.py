@@ -89,8 +89,9 @@ def test_rotation_is_a_rotation():
     r = rotation(np.array([0.1, -0.2, 0.3]), 2.0)
     np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(r) == pytest.approx(1.0)
-    np.testing.assert_allclose(r, rot.to_matrix(rot.from_rotvec(np.array([0.2, -0.4, 0.6]))),
-                               atol=1e-12)
+    # 0.1 rad/s about z for 2 s takes x to (cos 0.2, sin 0.2, 0)
+    np.testing.assert_allclose(rotation(np.array([0.0, 0.0, 0.1]), 2.0) @ [1.0, 0.0, 0.0],
+                               [np.cos(0.2), np.sin(0.2), 0.0], atol=1e-12)
 
 
 def test_the_shift_moves_at_its_speed_and_returns_when_released(walls):
