@@ -47,6 +47,13 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   speed off its reference / this)^2, along the route / at the goal, so a bump's momentum is
   braked before the lever turns the pair (the lever's torque about the centre is r x F: turning
   the pair with it moves the centre);
+- `hold_torque_scale`: w_torque x this while stopping and holding at the goal (default 1);
+- `clearance_motion: drift` (with `clearance`): the clearance's stop carries the pair as it is
+  at its centre's velocity off the reference, not each point at its own: traced (7.5 N, seed
+  230 of the fresh set 220-259), a bump sets the bag swinging at ~0.3 m/s on its strap and the
+  `points` prediction sends its corners metres through the walls, so the weight sits at its cap
+  and the lever is off for the 7 s after the bump while the pitch torque alone (0.033 N m)
+  lets the pair turn from 0.2 to 1 rad;
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
@@ -125,6 +132,7 @@ INERTIAS = ("robot", "pivot", "rigid", "centre")
 LEVER_USES = ("help", "guard")
 TRACKED = ("robot", "centre")
 LEVER_FROM = ("grasp", "bag")
+CLEARANCE_MOTIONS = ("points", "drift")
 
 
 @dataclass
@@ -151,6 +159,8 @@ class GovConfig:
                                  # centre of mass ("centre": turning the pair about it costs no
                                  # force, so the position loop stops fighting the attitude loop)
     w_torque: float = 3.0        # allocation: torque weight (force weight 1) at full attitude share
+    hold_torque_scale: float = 1.0  # x w_torque while stopping and holding at the goal (the
+                                 # lever's turn there moves the pair's centre near the JEM's walls)
     attitude_share: float = 3.0  # ... reached at this multiple of the attitude tolerance
     route_error: float = 0.0     # m: the force weight grows as (position error / this) past
                                  # it, so the route wins back over the lever (0: constant)
@@ -167,6 +177,10 @@ class GovConfig:
                                  # carried on by its velocity for the time the force limits
                                  # need to stop it (0: off)
     stop_share: float = 0.5      # share of the force limit the stopping time is planned with
+    clearance_motion: str = "points"  # what the clearance carries on: each point at its own
+                                 # velocity ("points") or the pair as it is, at its centre's
+                                 # velocity off the reference ("drift": the bag's swing on its
+                                 # strap and the planned motion are not a drift to stop)
     retime: bool = False         # the progress clock (False: follow the plan's clock)
     att_slow: float = 0.15       # rad: attitude error where the progress starts to slow ...
     att_stop: float = 0.35       # ... and where it stops
@@ -213,6 +227,10 @@ class GovConfig:
                 if v not in LEVER_FROM:
                     raise ValueError(f"lever_from must be one of {', '.join(LEVER_FROM)}, "
                                      f"got {v!r}")
+            elif f.name == "clearance_motion":
+                if v not in CLEARANCE_MOTIONS:
+                    raise ValueError(f"clearance_motion must be one of "
+                                     f"{', '.join(CLEARANCE_MOTIONS)}, got {v!r}")
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
@@ -222,7 +240,8 @@ class GovConfig:
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0:
                 raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
-        for name in ("inertia_scale", "settle_time", "sigma_rate", "fit_horizon", "fit_speed"):
+        for name in ("inertia_scale", "settle_time", "sigma_rate", "fit_horizon", "fit_speed",
+                     "hold_torque_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("momentum", "hold_momentum"):
@@ -422,10 +441,12 @@ class GovController:
             self._robot_half = 0.5 * float(cfg_files.astrobee()["envelope"])
         return self._keep_in, self._robot_half
 
-    def predicted_clearance(self, state: State) -> float:
+    def predicted_clearance(self, state: State, ref: Reference | None = None) -> float:
         """The least clearance (m) of the bag's corners and the robot's faces to the keep-in
-        boxes, each point carried on at its velocity for the time a stop takes at stop_share of
-        the smallest force limit on the pair's mass (astrobee_control.clearance)."""
+        boxes, now and at the end of a stop at stop_share of the smallest force limit on the
+        pair's mass (astrobee_control.clearance): each point carried on at its own velocity
+        (`clearance_motion: points`), or all of them with the pair's centre's velocity off the
+        reference's (`drift`; needs `ref`)."""
         self.walls()
         bag = self.bag
         M = float(self.mass.mass) + float(bag.mass)
@@ -433,6 +454,9 @@ class GovController:
         R_b = rot.to_matrix(rot.normalize(bag.orientation))
         corners = box_corners(bag.position, R_b, bag.size)
         v_b, v_r = np.asarray(bag.velocity, float), np.asarray(state.velocity, float)
+        if self.config.clearance_motion == "drift" and ref is not None:
+            R = rot.to_matrix(rot.normalize(state.orientation))
+            v_b = v_r = -self.centre_errors(state, ref, R)[1]
         p_r = np.asarray(state.position, float)
         # now and at the stop (v t / 2, t = |v| / a), the bag's corners and the robot's centre in
         # one query
@@ -489,13 +513,14 @@ class GovController:
                 w_f = max(w_f, (v_off / drift) ** 2)
             if cfg.clearance > 0 and cfg.lever and cfg.lever_use == "help" \
                     and self.bag is not None and self.bag.mass > 0:   # w_f weighs only the lever
-                d = self.predicted_clearance(state)
+                d = self.predicted_clearance(state, ref)
                 w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
             if cfg.lever and cfg.lever_use == "guard":
                 force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
             else:
+                w_t = cfg.w_torque * (1.0 if self.following else cfg.hold_torque_scale)
                 force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
-                                                    w_f, cfg.w_torque * share)
+                                                    w_f, w_t * share)
         else:
             force, torque = np.zeros(3), np.zeros(3)
         return Output(force=force, torque=torque, accel=R.T @ a_w, alpha=al_b,

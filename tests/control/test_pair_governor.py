@@ -154,6 +154,8 @@ def test_registered():
     ({"fit_margin": float("nan")}, "fit_margin must be a finite number >= 0"),
     ({"drift_speed": -0.02}, "drift_speed must be a finite number >= 0"),
     ({"hold_drift_speed": -1.0}, "hold_drift_speed must be a finite number >= 0"),
+    ({"hold_torque_scale": 0.0}, "hold_torque_scale must be > 0"),
+    ({"clearance_motion": "bag"}, "clearance_motion must be one of points, drift"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
@@ -217,6 +219,35 @@ def test_clearance_weights_the_route_near_a_wall():
 
 
 SIZE = np.array([0.5, 0.42, 0.25])       # the bag's box (m)
+
+
+def test_clearance_motion_drift_carries_the_pair_not_the_swing():
+    """`clearance_motion: drift`: a bag swinging on its strap with the pair's centre on its
+    reference (the robot moving against the bag, the centre still) is no drift: the prediction
+    is the clearance as it is now; each point carried on at its own velocity (`points`) sends
+    the swinging bag's corners through the wall. A drift of the centre is carried on by both."""
+    from astrobee.scenario import Scenario
+    sc = Scenario.load("node2_to_jem_fem_bag")
+    p, q = np.array(sc.robots[0].position, float), np.array(sc.robots[0].orientation, float)
+    m_r, m_b = float(mp.robot().mass), 10.0
+
+    def predicted(v_bag: np.ndarray, v_robot: np.ndarray, motion: str) -> float:
+        st = State(p, v_robot, q, np.zeros(3))
+        ref = Reference(p, np.zeros(3), orientation=q)
+        law = make_gov_law(FM, mp.robot(), {"lever": True, "clearance": 0.3,
+                                            "clearance_motion": motion})
+        law.observe_bag(BagObservation(p + rot.rotate(q, OFFSET), q, v_bag, np.zeros(3), True,
+                                       m_b, SIZE, "fem"), st)
+        return law.pd.predicted_clearance(st, ref)
+
+    still = predicted(np.zeros(3), np.zeros(3), "points")
+    swing = np.array([0.0, 0.0, 0.3])
+    robot_back = -(m_b / m_r) * swing                 # the pair's centre at rest
+    assert predicted(swing, robot_back, "points") < 0 < still
+    assert predicted(swing, robot_back, "drift") == pytest.approx(still)
+    drift = np.array([0.0, 0.0, -0.15])
+    assert predicted(drift, drift, "drift") == pytest.approx(predicted(drift, drift, "points"))
+    assert predicted(drift, drift, "drift") < still
 
 
 def pair_model_tick(law, x: np.ndarray, p, t: float, dt: float) -> np.ndarray:
@@ -354,3 +385,28 @@ def test_drift_speed_keeps_the_force_on_the_route_while_the_pair_drifts():
     # at the goal only hold_drift_speed weighs
     law_free = bent(drifting, {"hold_drift_speed": 0.03})
     assert law_free == pytest.approx(free)
+
+
+def test_hold_torque_scale_weighs_the_lever_down_only_at_the_goal():
+    """`hold_torque_scale`: with the pair turned and off its reference, the force the lever bends
+    away from the position loop's is smaller while holding at the goal with the torque weight
+    halved there; along the route (a segment followed) the scale changes nothing."""
+    q_turned = rot.from_rotvec(np.array([0.0, 0.1, 0.0]))
+    st = State(np.zeros(3), np.zeros(3), q_turned, np.zeros(3))
+    ref = Reference(np.array([0.0, 0.05, 0.0]), np.zeros(3), orientation=Q)
+
+    def bent(params: dict, following: bool) -> float:
+        law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
+        law.observe_bag(BagObservation(rot.rotate(q_turned, OFFSET), q_turned, np.zeros(3),
+                                       np.zeros(3), True, 10.0, np.array([0.5, 0.42, 0.25]),
+                                       "fem"), st)
+        law.pd.following = following
+        plain = make_gov_law(FM, mp.robot(), {})
+        plain.observe_bag(law.pd.bag, st)
+        plain.pd.following = following
+        want = plain.pd.step(st, ref, 0.016).force
+        return float(np.linalg.norm(law.pd.step(st, ref, 0.016).force - want))
+
+    held, halved = bent({}, False), bent({"hold_torque_scale": 0.5}, False)
+    assert held > 0.2 and halved < 0.5 * held                     # measured 0.49 vs 0.14 N
+    assert bent({"hold_torque_scale": 0.5}, True) == pytest.approx(bent({}, True))
