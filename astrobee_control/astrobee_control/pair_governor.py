@@ -54,6 +54,14 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   `points` prediction sends its corners metres through the walls, so the weight sits at its cap
   and the lever is off for the 7 s after the bump while the pitch torque alone (0.033 N m)
   lets the pair turn from 0.2 to 1 rad;
+- `unwind` (the long way round): a pair turning away from its reference goes on round it
+  (the error 2 pi - |e| the other way) when that ends sooner than stopping and coming back
+  (turn_time, at the brake_share deceleration and the mode's hard rate limit). Solved by the
+  oracle at 7.5 N (seeds 230, 245 of the fresh set 220-259, studies/results/oracle/), the
+  optimal recoveries never brake the bumped turn: the pair goes on round at 0.2-0.35 rad/s with
+  <= 0.01 N m of torque and arrives upright at the budget's end, where gov_hold brakes with
+  its pitch torque saturated, the turn still grows to ~1.5 rad and the lever's force that
+  helps it drives the pair 1-1.8 m off its route into the JEM's walls;
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
@@ -207,6 +215,9 @@ class GovConfig:
     fit_horizon: float = 4.0     # s of the plan ahead the fit looks at
     fit_speed: float = 0.05      # m/s: how fast the shift may move
     fit_margin: float = 0.1      # m: clearance beyond which a larger shift buys nothing
+    unwind: bool = False         # a pair turning away from its reference goes on round the
+                                 # long way (2 pi - the error) when that reaches it sooner than
+                                 # braking and coming back (pair_governor.unwound_error)
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
@@ -234,7 +245,7 @@ class GovConfig:
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
-            elif f.name in ("lever", "retime", "inline"):
+            elif f.name in ("lever", "retime", "inline", "unwind"):
                 if not isinstance(v, (bool, np.bool_)):
                     raise ValueError(f"{f.name} must be true or false, got {v!r}")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
@@ -273,6 +284,44 @@ def rate_limited(e: np.ndarray, k: np.ndarray, alpha_max: np.ndarray, w_max: flo
     return np.sign(e) * np.minimum(k * mag, np.minimum(np.sqrt(2.0 * alpha_max * mag), w_max))
 
 
+def turn_time(angle: float, v: float, alpha: float, w_max: float = math.inf) -> float:
+    """The least time (s) to turn `angle` (rad) and stop, starting at `v` rad/s towards it
+    (negative: away), at +-alpha rad/s^2 and at most w_max rad/s (bang-coast-bang)."""
+    if v < 0:                                  # stop first, then turn the angle grown meanwhile
+        return -v / alpha + turn_time(angle + v * v / (2 * alpha), 0.0, alpha, w_max)
+    v = min(v, w_max)
+    peak = math.sqrt(v * v / 2 + alpha * angle)
+    if v * v / (2 * alpha) > angle:            # too fast to stop in time: overshoot and come back
+        over = v * v / (2 * alpha) - angle
+        return v / alpha + turn_time(over, 0.0, alpha, w_max)
+    if peak <= w_max:
+        return (2 * peak - v) / alpha
+    d_acc, d_dec = (w_max ** 2 - v * v) / (2 * alpha), w_max ** 2 / (2 * alpha)
+    return (w_max - v) / alpha + (angle - d_acc - d_dec) / w_max + w_max / alpha
+
+
+def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: float,
+                  unwinding: bool) -> tuple[np.ndarray, bool]:
+    """The attitude error to steer by and whether it is the long way round: a pair turning away
+    from its reference at w (body rad/s) about the error's axis goes on round (the error
+    e - 2 pi e / |e|) when that turn, at most w_max, ends sooner than stopping and coming back,
+    or when it already went that way (`unwinding`) and still turns away. w_max: the flight
+    mode's hard rate limit, which the long way round coasts at. The oracle's 7.5 N
+    recoveries do this (docs/results/pair_control_followup.md): the torque limits stop the
+    bumped pair's turn only ~1.2 rad later, and the way back then costs more than the way on."""
+    th = float(np.linalg.norm(e))
+    if th < 1e-6:
+        return e, False
+    u = e / th
+    v = float(w @ u)                           # rate towards the reference the short way
+    if v >= 0:
+        return e, False
+    a = 1.0 / float((u * u) @ (1.0 / np.asarray(alpha_max, float)))
+    if unwinding or turn_time(2 * math.pi - th, -v, a, w_max) < turn_time(th, v, a):
+        return e - 2 * math.pi * u, True
+    return e, False
+
+
 def ramp(x: float, lo: float, hi: float) -> float:
     """1 below lo, 0 above hi, linear between."""
     return float(np.clip((hi - x) / (hi - lo), 0.0, 1.0))
@@ -292,6 +341,7 @@ class GovController:
         self._keep_in = None               # clearance.KeepIn, built on first use
         self.following = False             # a segment is followed (the inline reference is on)
         self.shift = (np.zeros(3), np.zeros(3))   # the corridor fit's (shift, its velocity)
+        self.unwinding = False             # the attitude loop goes the long way round
 
     def reset(self) -> None:
         """Nothing integrates."""
@@ -493,12 +543,16 @@ class GovController:
         e_att = rot.attitude_error(q, ref.orientation)
         t_lim, f_lim = np.asarray(fm.max_torque, float), np.asarray(fm.max_force, float)
         alpha_max = cfg.brake_share * t_lim / np.diag(I)
-        w_des = R.T @ np.asarray(ref.omega, float) + rate_limited(
-            e_att, fm.att_kp / fm.omega_kd, alpha_max, float(fm.hard_limit_omega))
         w_fb = w
         mix = cfg.momentum if self.following else cfg.hold_momentum
         if mix > 0 and self.bag is not None and self.bag.mass > 0:
             w_fb = (1 - mix) * w + mix * self.pair_rate(state)
+        e_go, w_max = e_att, float(fm.hard_limit_omega)
+        if cfg.unwind and self.bag is not None and self.bag.mass > 0:
+            e_go, self.unwinding = unwound_error(e_att, w_fb - R.T @ np.asarray(ref.omega, float),
+                                                 alpha_max, w_max, self.unwinding)
+        w_des = R.T @ np.asarray(ref.omega, float) + rate_limited(
+            e_go, fm.att_kp / fm.omega_kd, alpha_max, w_max)
         al_b = R.T @ np.asarray(ref.alpha, float) + fm.omega_kd * (w_des - w_fb)
         tau_des = I @ al_b + np.cross(w, I @ w)
         if fm.control_enabled:

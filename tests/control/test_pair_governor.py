@@ -9,7 +9,8 @@ from astrobee import rotations as rot
 from astrobee_control import mass as mp
 from astrobee_control import registry
 from astrobee_control.law import BagObservation
-from astrobee_control.pair_governor import GovConfig, make_gov_law, rate_limited
+from astrobee_control.pair_governor import (GovConfig, make_gov_law, rate_limited, turn_time,
+                                            unwound_error)
 from astrobee_control.pd import Reference, State
 from astrobee_control.reference import rest_to_rest
 
@@ -156,6 +157,7 @@ def test_registered():
     ({"hold_drift_speed": -1.0}, "hold_drift_speed must be a finite number >= 0"),
     ({"hold_torque_scale": 0.0}, "hold_torque_scale must be > 0"),
     ({"clearance_motion": "bag"}, "clearance_motion must be one of points, drift"),
+    ({"unwind": "yes"}, "unwind must be true or false"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
@@ -410,3 +412,44 @@ def test_hold_torque_scale_weighs_the_lever_down_only_at_the_goal():
     held, halved = bent({}, False), bent({"hold_torque_scale": 0.5}, False)
     assert held > 0.2 and halved < 0.5 * held                     # measured 0.49 vs 0.14 N
     assert bent({"hold_torque_scale": 0.5}, True) == pytest.approx(bent({}, True))
+
+
+def test_turn_time_bang_coast_bang():
+    """turn_time: rest to rest 1 rad at 1 rad/s^2 takes 2 s; capped at 1 rad/s, 10 rad take
+    1 + 9 + 1 s; turning away at 1 rad/s first stops (1 s, 0.5 rad more), then turns; too fast
+    to stop within the angle, it overshoots and comes back."""
+    assert turn_time(1.0, 0.0, 1.0) == pytest.approx(2.0)
+    assert turn_time(10.0, 0.0, 1.0, 1.0) == pytest.approx(11.0)
+    assert turn_time(0.5, -1.0, 1.0) == pytest.approx(1.0 + turn_time(1.0, 0.0, 1.0))
+    assert turn_time(0.125, 1.0, 1.0) == pytest.approx(1.0 + turn_time(0.375, 0.0, 1.0))
+
+
+def test_unwound_error_goes_on_round_when_that_is_sooner():
+    """A pair bumped into a turn away from its reference at 0.25 rad/s, 0.5 rad off, with the
+    torque limits' 0.022 rad/s^2 on the pair: stopping it takes 1.4 rad more and the way back
+    ~31 s; on round (5.8 rad at 0.3 rad/s at most) ~26 s, so the error becomes the long way.
+    Turning away slowly (0.05 rad/s), or towards the reference, the short way stays; once on
+    the long way it stays there while the pair still turns away."""
+    a = np.full(3, 0.022)
+    e = np.array([0.0, 0.5, 0.0])
+    long_way, on = unwound_error(e, np.array([0.0, -0.25, 0.0]), a, 0.3, False)
+    assert on and long_way == pytest.approx(np.array([0.0, 0.5 - 2 * np.pi, 0.0]))
+    assert not unwound_error(e, np.array([0.0, -0.05, 0.0]), a, 0.3, False)[1]
+    assert not unwound_error(e, np.array([0.0, 0.25, 0.0]), a, 0.3, True)[1]
+    assert unwound_error(e, np.array([0.0, -0.05, 0.0]), a, 0.3, True)[1]
+
+
+def test_unwind_lets_the_bumped_pair_turn_on_instead_of_braking():
+    """`unwind`: with the bag held and the robot turning away from its reference at 0.25 rad/s
+    (pitch) at 0.15 rad/s, 0.5 rad off, the plain law brakes with the pitch torque at its limit;
+    the law that goes on round does not brake."""
+    q = rot.from_rotvec(np.array([0.0, -0.5, 0.0]))
+    st = State(np.zeros(3), np.zeros(3), q, np.array([0.0, -0.15, 0.0]))
+    ref = Reference(np.zeros(3), np.zeros(3), orientation=Q)
+    torques = {}
+    for unwind in (False, True):
+        law = make_gov_law(FM, mp.robot(), {"unwind": unwind})
+        law.observe_bag(bag_at(st), st)
+        torques[unwind] = law.pd.step(st, ref, 0.016).torque[1]
+    assert torques[False] == pytest.approx(FM.max_torque[1])
+    assert torques[True] < 0.0      # on round it speeds up to the mode's 0.17 rad/s limit
