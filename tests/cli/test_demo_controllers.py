@@ -16,7 +16,7 @@ def nodes(tmp_path, **args):
     return {s.name: s for s in cargo_transport.generate_nodes(ctx)}
 
 
-def test_demo_flies_the_fem_bag_with_pd_then_gov_mom_with_the_same_bump(tmp_path):
+def test_demo_flies_the_fem_bag_with_pd_then_gov_uw_with_the_same_bump(tmp_path):
     legs = [Scenario.load(n) for n in cargo_transport.DEMO_LEGS]
     carrying = [s for s in legs if s.bag is not None]
     assert len(carrying) == 2 and all(s.bag.model == "fem" and s.bag.solver == "fast" for s in carrying)
@@ -28,8 +28,9 @@ def test_demo_flies_the_fem_bag_with_pd_then_gov_mom_with_the_same_bump(tmp_path
     # the default robot's PD flies the first two legs, queen's pair_gov (its own namespace) the third
     assert "pd_controller_node" in specs and "queen/pair_gov_controller_node" in specs
     assert specs["queen/pair_gov_controller_node"].namespace == "queen"
-    # ... with the last leg's controller_params: gov_mom (studies/momentum_bag.yaml)
-    assert params_file(specs["queen/pair_gov_controller_node"]) == {**GOV_BAG, "momentum": 1.0}
+    # ... with the last leg's controller_params: gov_uw (studies/unwind.yaml)
+    assert params_file(specs["queen/pair_gov_controller_node"]) == {
+        **GOV_BAG, "momentum": 1.0, "fit": 0.3, "hold_error": 0.2, "unwind": True}
     assert params_file(specs["pd_controller_node"]) == {}
     mission = specs["mission"].command
     assert [mission[i + 1] for i, a in enumerate(mission) if a == "--scenario"] == list(cargo_transport.DEMO_LEGS)
@@ -174,3 +175,14 @@ def test_two_legs_flying_one_law_must_agree_on_its_scenario_params(tmp_path, mon
     assert str(err.value) == ("scenario node2_to_jem_fem_bag_gov_bag: pair_gov flies with other "
                               "controller_params than in node2_to_jem_fem_bag_pair_gov: one set "
                               "of parameters per law")
+
+
+def test_demo_law_is_the_studys_gov_uw():
+    """The demo's last leg flies the very parameters studies/unwind.yaml flew as gov_uw."""
+    from pathlib import Path
+    study = yaml.safe_load((Path(__file__).resolve().parents[2] / "studies" / "unwind.yaml")
+                           .read_text())
+    from astrobee import config
+    leg = config.scenario(cargo_transport.DEMO_LEGS[-1])
+    assert leg["controller"] == study["controllers"]["gov_uw"]["controller"]
+    assert leg["controller_params"] == study["controllers"]["gov_uw"]["params"]

@@ -21,9 +21,10 @@ its share of the bag's mass. video (true | false:
 render one MP4 per leg into the run folder, default: with demo), demo (true: fly DEMO_LEGS
 in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag_bump (the
 FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) with PD, then
-node2_to_jem_fem_bag_gov_mom: the same carry, seed and bump flown by gov_mom, the governed pair
-law with the folded bag's lever, the clearance weight and the pair's rate damped along the route;
-video_compare.mp4 shows the two carries side by side).
+node2_to_jem_fem_bag_gov_uw: the same carry, seed and bump flown by gov_uw, the governed pair
+law with the folded bag's lever, the clearance weight, the pair's rate damped along the route,
+the corridor fit, the capped hold and the long way round; video_compare.mp4 shows the two
+carries side by side).
 
 Controller parameters: each law's node gets the law's defaults, then config/controllers.yaml's
 section for it (`<law>: {name: value}`), then the scenario's own `controller_params:
@@ -74,12 +75,12 @@ from roszen.parameters import coerce, infer_type
 
 
 # no bag (PD); the FEM bag on the strap grasp with a 5 N bump on the bag drawn from the seed,
-# flown by PD and then, the same seed and bump, by the governed pair law as gov_mom (pair_gov with
-# the scenario's controller_params: lever, lever_from bag, clearance 0.3, momentum 1;
-# studies/momentum_bag.yaml)
-DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_mom")
+# flown by PD and then, the same seed and bump, by the governed pair law as gov_uw (pair_gov with
+# the scenario's controller_params: lever, lever_from bag, clearance 0.3, momentum 1, fit 0.3,
+# hold_error 0.2, unwind; studies/unwind.yaml)
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_uw")
 # the same carry by two controllers, side by side in video_compare.mp4 (render_demo_compare)
-DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_mom")
+DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_uw")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
 SAFETY_DEFAULT = "true"
@@ -107,7 +108,7 @@ ARGUMENTS = {
                "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
     "demo": ("false", "fly DEMO_LEGS (no bag; the FEM bag with a 5 N bump by PD, then by "
-                      "gov_mom (pair_gov): the same seed, the same bump), the sim reset between"),
+                      "gov_uw (pair_gov): the same seed, the same bump), the sim reset between"),
     "bag_model": ("", f"scenario override: {' | '.join(BAG_MODELS + (NO_BAG,))}"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
@@ -390,7 +391,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         if handover:
             args += ["--handover"] + (["--await-recorder"] if ctx.flag("record", True) else [])
-        if demo:                        # the PD leg is there to fail where gov_mom does not
+        if demo:                        # the PD leg is there to fail where gov_uw does not
             args += ["--keep-going"]
         nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
                               command=["run", "astrobee_bringup", "mission", *args],
