@@ -148,6 +148,10 @@ def main() -> None:
             pair_tick_times(20 * args.repeats, make_gov_law,
                             study["controllers"][law]["params"]),
             target="   budget 16 ms a tick; target <= 50 ms")
+    unwind = yaml.safe_load((ROOT / "studies" / "unwind.yaml").read_text())
+    row("gov_uw tick (CPU, studies/unwind.yaml)",
+        pair_tick_times(20 * args.repeats, make_gov_law, unwind["controllers"]["gov_uw"]["params"]),
+        target="   budget 16 ms a tick; target <= 50 ms")
     ours, ref = allocation_times(20 * args.repeats)
     row("allocation, active set (CPU)", ours, "us")
     row("allocation, scipy lsq_linear bvls (CPU)", ref, "us")
