@@ -47,21 +47,28 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   speed off its reference / this)^2, along the route / at the goal, so a bump's momentum is
   braked before the lever turns the pair (the lever's torque about the centre is r x F: turning
   the pair with it moves the centre);
-- `hold_torque_scale`: w_torque x this while stopping and holding at the goal (default 1);
+- `hold_torque_scale`: w_torque x this while stopping and holding at the goal (default 1;
+  gov_hold + 0.5: 7.5 N 21/40 with 2 contact flights on seeds 180-219, 23/40 with 3 on 220-259,
+  the same contact seeds as gov_hold's; not kept);
 - `clearance_motion: drift` (with `clearance`): the clearance's stop carries the pair as it is
   at its centre's velocity off the reference, not each point at its own: traced (7.5 N, seed
   230 of the fresh set 220-259), a bump sets the bag swinging at ~0.3 m/s on its strap and the
   `points` prediction sends its corners metres through the walls, so the weight sits at its cap
   and the lever is off for the 7 s after the bump while the pitch torque alone (0.033 N m)
-  lets the pair turn from 0.2 to 1 rad;
+  lets the pair turn from 0.2 to 1 rad (gov_hold + drift: 10 N 5/22 with 6 contact flights on
+  seeds 180-201, gov_hold 10/22 with 6; not kept);
 - `unwind` (the long way round): a pair turning away from its reference goes on round it
   (the error 2 pi - |e| the other way) when that ends sooner than stopping and coming back
   (turn_time, at the brake_share deceleration and the mode's hard rate limit). Solved by the
   oracle at 7.5 N (seeds 230, 245 of the fresh set 220-259, studies/results/oracle/), the
-  optimal recoveries never brake the bumped turn: the pair goes on round at 0.2-0.35 rad/s with
-  <= 0.01 N m of torque and arrives upright at the budget's end, where gov_hold brakes with
+  optimal recoveries never brake the bumped turn: the pair goes on round at 0.16-0.35 rad/s
+  with <= 0.01 N m of torque and arrives upright at the budget's end, where gov_hold brakes with
   its pitch torque saturated, the turn still grows to ~1.5 rad and the lever's force that
-  helps it drives the pair 1-1.8 m off its route into the JEM's walls;
+  helps it drives the pair 1-1.8 m off its route into the JEM's walls. gov_uw = gov_hold +
+  unwind (studies/unwind.yaml, pre-registered, fresh seeds): 10 N 24/40 vs PD 7/40 and 25/40 vs
+  8/40 (McNemar p = 1.5e-5 both) with 1 and 0 contact flights vs 4 and 4; 7.5 N 24/40 vs 7/40
+  (p = 1.5e-5) and 29/40 vs 9/40 (p = 1.9e-6) with none vs 0 and 2; 5 N 35/40 vs 20/40, below
+  90% of the oracle-feasible seeds (gov_hold 37/40, gov_mom 36/40 on the same seeds);
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
@@ -286,7 +293,8 @@ def rate_limited(e: np.ndarray, k: np.ndarray, alpha_max: np.ndarray, w_max: flo
 
 def turn_time(angle: float, v: float, alpha: float, w_max: float = math.inf) -> float:
     """The least time (s) to turn `angle` (rad) and stop, starting at `v` rad/s towards it
-    (negative: away), at +-alpha rad/s^2 and at most w_max rad/s (bang-coast-bang)."""
+    (negative: away), at +-alpha rad/s^2 and at most w_max rad/s (bang-coast-bang; a start
+    faster than w_max towards it is taken as w_max: an estimate, not a plan)."""
     if v < 0:                                  # stop first, then turn the angle grown meanwhile
         return -v / alpha + turn_time(angle + v * v / (2 * alpha), 0.0, alpha, w_max)
     v = min(v, w_max)
