@@ -56,6 +56,22 @@ def fly_reference(params: dict, turned: float) -> np.ndarray:
 
 
 OFFSET = np.array([-0.484, 0, -0.065])        # bag_at's robot -> bag centre (body frame)
+SIZE = np.array([0.5, 0.42, 0.25])       # the bag's box (m)
+
+
+def lever_bend(st: State, ref: Reference, params: dict, following: bool = True):
+    """(how far pair_gov with `lever` and `params` bends the force from the plain law's, N; the
+    law) for `st` tracking `ref`, the bag at OFFSET turned and moving with the robot; `following`:
+    a segment followed (else stopping or holding at the goal)."""
+    law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
+    law.observe_bag(BagObservation(np.asarray(st.position) + rot.rotate(st.orientation, OFFSET),
+                                   st.orientation, st.velocity, np.zeros(3), True, 10.0, SIZE,
+                                   "fem"), st)
+    plain = make_gov_law(FM, mp.robot(), {})
+    plain.observe_bag(law.pd.bag, st)
+    law.pd.following = plain.pd.following = following
+    want = plain.pd.step(st, ref, 0.016).force
+    return float(np.linalg.norm(law.pd.step(st, ref, 0.016).force - want)), law
 
 
 def centre_lever() -> np.ndarray:
@@ -202,15 +218,8 @@ def test_clearance_weights_the_route_near_a_wall():
         reference moves with the pair, 2 cm off."""
         st = State(p, v, q_turned, np.zeros(3))
         ref = Reference(p + np.array([0.0, 0.0, 0.02]), v, orientation=q)
-        law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
-        law.observe_bag(BagObservation(p + rot.rotate(q_turned, OFFSET), q_turned, v,
-                                       np.zeros(3), True, 10.0, np.array([0.5, 0.42, 0.25]),
-                                       "fem"), st)
-        out = law.pd.step(st, ref, 0.016)
-        plain = make_gov_law(FM, mp.robot(), {})
-        plain.observe_bag(law.pd.bag, st)
-        want = plain.pd.step(st, ref, 0.016).force
-        return float(np.linalg.norm(out.force - want)), law.pd.predicted_clearance(st)
+        bend, law = lever_bend(st, ref, params, following=False)
+        return bend, law.pd.predicted_clearance(st)
 
     still, calm = bent(np.zeros(3), {"clearance": 0.3})
     assert still == pytest.approx(bent(np.zeros(3), {})[0], rel=1e-9) and calm > 0.3
@@ -218,9 +227,6 @@ def test_clearance_weights_the_route_near_a_wall():
     near, d = bent(towards, {"clearance": 0.3})
     free, _ = bent(towards, {})
     assert d < 0.3 and free > 0.05 and near < 0.5 * free
-
-
-SIZE = np.array([0.5, 0.42, 0.25])       # the bag's box (m)
 
 
 def test_clearance_motion_drift_carries_the_pair_not_the_swing():
@@ -369,14 +375,7 @@ def test_drift_speed_keeps_the_force_on_the_route_while_the_pair_drifts():
     def bent(v: np.ndarray, params: dict) -> float:
         st = State(np.zeros(3), v, q_turned, np.zeros(3))
         ref = Reference(np.array([0.0, 0.0, 0.02]), np.zeros(3), orientation=Q)
-        law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
-        law.observe_bag(BagObservation(rot.rotate(q_turned, OFFSET), q_turned, v, np.zeros(3),
-                                       True, 10.0, np.array([0.5, 0.42, 0.25]), "fem"), st)
-        law.pd.following = True
-        plain = make_gov_law(FM, mp.robot(), {})
-        plain.observe_bag(law.pd.bag, st)
-        want = plain.pd.step(st, ref, 0.016).force
-        return float(np.linalg.norm(law.pd.step(st, ref, 0.016).force - want))
+        return lever_bend(st, ref, params)[0]
 
     drifting = np.array([0.0, 0.1, 0.0])
     assert bent(np.zeros(3), {"drift_speed": 0.03}) == pytest.approx(bent(np.zeros(3), {}))
@@ -398,16 +397,7 @@ def test_hold_torque_scale_weighs_the_lever_down_only_at_the_goal():
     ref = Reference(np.array([0.0, 0.05, 0.0]), np.zeros(3), orientation=Q)
 
     def bent(params: dict, following: bool) -> float:
-        law = make_gov_law(FM, mp.robot(), {"lever": True, **params})
-        law.observe_bag(BagObservation(rot.rotate(q_turned, OFFSET), q_turned, np.zeros(3),
-                                       np.zeros(3), True, 10.0, np.array([0.5, 0.42, 0.25]),
-                                       "fem"), st)
-        law.pd.following = following
-        plain = make_gov_law(FM, mp.robot(), {})
-        plain.observe_bag(law.pd.bag, st)
-        plain.pd.following = following
-        want = plain.pd.step(st, ref, 0.016).force
-        return float(np.linalg.norm(law.pd.step(st, ref, 0.016).force - want))
+        return lever_bend(st, ref, params, following)[0]
 
     held, halved = bent({}, False), bent({"hold_torque_scale": 0.5}, False)
     assert held > 0.2 and halved < 0.5 * held                     # measured 0.49 vs 0.14 N
