@@ -1,5 +1,6 @@
-"""One oracle recovery written out: how the optimal plan carries the bumped pair through (the
-robot's distance from the plan, its attitude error and rate, the wrench) for one seed and bump.
+"""Write out one oracle recovery: the optimal plan for one seed's bump, node by node.
+
+Per grid node: the robot's distance from the plan, its attitude error and rate, the wrench.
 
     python studies/oracle_recovery.py --seed 230 --magnitude 7.5 \
         --out studies/results/oracle/recovery_230_7.5.csv
