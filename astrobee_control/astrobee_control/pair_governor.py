@@ -148,6 +148,7 @@ LEVER_USES = ("help", "guard")
 TRACKED = ("robot", "centre")
 LEVER_FROM = ("grasp", "bag")
 CLEARANCE_MOTIONS = ("points", "drift")
+UNWIND_RATES = ("damped", "pair")
 
 
 @dataclass
@@ -225,6 +226,13 @@ class GovConfig:
     unwind: bool = False         # a pair turning away from its reference goes on round the
                                  # long way (2 pi - the error) when that reaches it sooner than
                                  # braking and coming back (pair_governor.unwound_error)
+    unwind_rate: str = "damped"  # the turn the long way round is decided on: the attitude
+                                 # loop's damped rate ("damped", momentum / hold_momentum) or
+                                 # the pair's always ("pair": the robot swinging against the
+                                 # bag it holds is not the pair turning)
+    unwind_coast: float = 0.0    # rad/s: a pair turning towards its reference (either way
+                                 # round) faster than the mode's hard rate limit keeps that rate,
+                                 # up to this, braked only to stop there (0: braked to the limit)
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
@@ -249,6 +257,10 @@ class GovConfig:
                 if v not in CLEARANCE_MOTIONS:
                     raise ValueError(f"clearance_motion must be one of "
                                      f"{', '.join(CLEARANCE_MOTIONS)}, got {v!r}")
+            elif f.name == "unwind_rate":
+                if v not in UNWIND_RATES:
+                    raise ValueError(f"unwind_rate must be one of {', '.join(UNWIND_RATES)}, "
+                                     f"got {v!r}")
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
@@ -309,12 +321,13 @@ def turn_time(angle: float, v: float, alpha: float, w_max: float = math.inf) -> 
 
 
 def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: float,
-                  unwinding: bool) -> tuple[np.ndarray, bool]:
+                  unwinding: bool, w_keep: float = 0.0) -> tuple[np.ndarray, bool]:
     """The attitude error to steer by and whether it is the long way round: a pair turning away
     from its reference at w (body rad/s) about the error's axis goes on round (the error
     e - 2 pi e / |e|) when that turn, at most w_max, ends sooner than stopping and coming back,
     or when it already went that way (`unwinding`) and still turns away. w_max: the flight
-    mode's hard rate limit, which the long way round coasts at. The oracle's 7.5 N
+    mode's hard rate limit, which the long way round coasts at (or at the turn's own rate, up
+    to w_keep, where that is faster: GovConfig.unwind_coast). The oracle's 7.5 N
     recoveries do this (docs/results/pair_control_followup.md): the torque limits stop the
     bumped pair's turn only ~1.2 rad later, and the way back then costs more than the way on."""
     th = float(np.linalg.norm(e))
@@ -325,7 +338,8 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
     if v >= 0:
         return e, False
     a = 1.0 / float((u * u) @ (1.0 / np.asarray(alpha_max, float)))
-    if unwinding or turn_time(2 * math.pi - th, -v, a, w_max) < turn_time(th, v, a):
+    w_round = max(w_max, min(-v, w_keep))
+    if unwinding or turn_time(2 * math.pi - th, -v, a, w_round) < turn_time(th, v, a):
         return e - 2 * math.pi * u, True
     return e, False
 
@@ -556,9 +570,17 @@ class GovController:
         if mix > 0 and self.bag is not None and self.bag.mass > 0:
             w_fb = (1 - mix) * w + mix * self.pair_rate(state)
         e_go, w_max = e_att, float(fm.hard_limit_omega)
-        if cfg.unwind and self.bag is not None and self.bag.mass > 0:
-            e_go, self.unwinding = unwound_error(e_att, w_fb - R.T @ np.asarray(ref.omega, float),
-                                                 alpha_max, w_max, self.unwinding)
+        if (cfg.unwind or cfg.unwind_coast > 0) and self.bag is not None and self.bag.mass > 0:
+            w_turn = w_fb
+            if cfg.unwind_rate == "pair" and mix < 1:
+                w_turn = self.pair_rate(state)
+            w_turn = w_turn - R.T @ np.asarray(ref.omega, float)
+            if cfg.unwind:
+                e_go, self.unwinding = unwound_error(e_att, w_turn, alpha_max, w_max,
+                                                     self.unwinding, cfg.unwind_coast)
+            th = float(np.linalg.norm(e_go))
+            if cfg.unwind_coast > 0 and th > 1e-6:     # keep a fast turn that goes the way on
+                w_max = max(w_max, min(float(w_turn @ e_go) / th, cfg.unwind_coast))
         w_des = R.T @ np.asarray(ref.omega, float) + rate_limited(
             e_go, fm.att_kp / fm.omega_kd, alpha_max, w_max)
         al_b = R.T @ np.asarray(ref.alpha, float) + fm.omega_kd * (w_des - w_fb)

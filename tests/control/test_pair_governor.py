@@ -174,6 +174,8 @@ def test_registered():
     ({"hold_torque_scale": 0.0}, "hold_torque_scale must be > 0"),
     ({"clearance_motion": "bag"}, "clearance_motion must be one of points, drift"),
     ({"unwind": "yes"}, "unwind must be true or false"),
+    ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
+    ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
@@ -443,3 +445,52 @@ def test_unwind_lets_the_bumped_pair_turn_on_instead_of_braking():
         torques[unwind] = law.pd.step(st, ref, 0.016).torque[1]
     assert torques[False] == pytest.approx(FM.max_torque[1])
     assert torques[True] < 0.0      # on round it speeds up to the mode's 0.17 rad/s limit
+
+
+def test_unwind_coast_keeps_a_fast_turn_towards_the_reference():
+    """`unwind_coast`: the bag turning with the robot (pitch) towards the reference at 0.2 rad/s,
+    3 rad off, above the mode's 0.17 rad/s limit but slow enough to stop within the error (0.21
+    rad/s at the brake share of the torque limit): the plain law brakes it with the pitch torque
+    at its limit; coasting up to 0.35 rad/s it keeps the turn (no pitch torque)."""
+    q = rot.from_rotvec(np.array([0.0, -3.0, 0.0]))
+    w = np.array([0.0, 0.2, 0.0])
+    st = State(np.zeros(3), np.zeros(3), q, w)
+    d = rot.rotate(q, OFFSET)
+    bag = BagObservation(d, q, np.cross(w, d), w, True, 10.0, SIZE, "fem")
+    ref = Reference(np.zeros(3), np.zeros(3), orientation=Q)
+    torques = {}
+    for coast in (0.0, 0.35):
+        law = make_gov_law(FM, mp.robot(), {"unwind_coast": coast})
+        law.observe_bag(bag, st)
+        np.testing.assert_allclose(law.pd.pair_rate(st), w, atol=1e-9)     # a rigid pair
+        torques[coast] = law.pd.step(st, ref, 0.016).torque[1]
+    assert torques[0.0] == pytest.approx(-FM.max_torque[1])
+    assert abs(torques[0.35]) < 1e-6
+
+
+def test_unwind_rate_pair_does_not_take_the_robots_swing_for_the_pairs_turn():
+    """`unwind_rate: pair`: holding at the goal 0.7 rad off, the robot swings away at 0.35 rad/s
+    against a bag that carries the opposite momentum (the pair itself not turning): decided on
+    the robot's own rate (the hold's damped rate) the law goes the long way round; decided on the
+    pair's it does not."""
+    q = rot.from_rotvec(np.array([0.0, -0.7, 0.0]))
+    w = np.array([0.0, -0.35, 0.0])
+    st = State(np.zeros(3), np.zeros(3), q, w)
+    d = rot.rotate(q, OFFSET)
+    m_r = float(mp.robot().mass)
+    mu = m_r * 10.0 / (m_r + 10.0)
+    skew = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+    I_r = rot.to_matrix(q) @ np.asarray(mp.robot().inertia, float) @ rot.to_matrix(q).T
+    dv = np.linalg.lstsq(mu * skew, -I_r @ rot.rotate(q, w), rcond=None)[0]
+    bag = BagObservation(d, q, dv, np.zeros(3), True, 10.0, SIZE, "fem")
+    ref = Reference(np.zeros(3), np.zeros(3), orientation=Q)
+    unwinding = {}
+    for rate in ("damped", "pair"):
+        law = make_gov_law(FM, mp.robot(), {"unwind": True, "unwind_rate": rate,
+                                            "momentum": 1.0})
+        law.observe_bag(bag, st)
+        law.pd.following = False
+        np.testing.assert_allclose(law.pd.pair_rate(st), 0.0, atol=1e-9)
+        law.pd.step(st, ref, 0.016)
+        unwinding[rate] = law.pd.unwinding
+    assert unwinding == {"damped": True, "pair": False}
