@@ -69,6 +69,13 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   8/40 (McNemar p = 1.5e-5 both) with 1 and 0 contact flights vs 4 and 4; 7.5 N 24/40 vs 7/40
   (p = 1.5e-5) and 29/40 vs 9/40 (p = 1.9e-6) with none vs 0 and 2; 5 N 35/40 vs 20/40, below
   90% of the oracle-feasible seeds (gov_hold 37/40, gov_mom 36/40 on the same seeds);
+- `unwind_rate: pair` decides the long way round on the pair's rate also while holding at the
+  goal (where the loop damps the robot's own rate, which swings against the bag), and
+  `unwind_coast` (rad/s) lets a turn towards the reference that is faster than the mode's limit
+  keep its rate up to this, braked only to stop there (the oracle's recoveries coast at
+  0.2-0.35 rad/s). Neither kept (thirteenth session, studies/late_bumps.yaml): unwind_rate pair
+  flew exactly gov_uw's outcomes (7.5 N seeds 180-219 25/40, 5 N seeds 0-19 16/20); with
+  unwind_coast 0.35 25/40 (6 gained, 6 lost) and 17/20 (1 gained);
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
