@@ -6,7 +6,7 @@ split needs no column the study did not write. Example (the thirteenth session's
 docs/results/pair_control_followup.md section 12):
 
     python studies/bump_time_split.py --results studies/results/unwind/results.csv \
-        --oracle studies/results/oracle/feasibility_bumped.csv --split 23
+        --oracle studies/results/oracle/feasibility_bumped.csv --split 20
 
 Per magnitude and controller: successes / flights early and late with Wilson 95% intervals and
 Fisher's exact p on the 2x2 (early/late x success/failure); per magnitude the oracle's feasible /
@@ -32,12 +32,14 @@ def bump_time(seed: int, cache: dict[int, float] = {}) -> float:    # noqa: B006
     return cache[seed]
 
 
-def split_counts(rows: list[dict], split: float, times=bump_time) -> dict:
-    """(magnitude, label) -> {"early": [successes, n], "late": [...]} over bumped rows; a row
-    is late when its seed's bump came at or after `split` s."""
+def split_counts(rows: list[dict], split: float, times=bump_time,
+                 skip_blocks: tuple = ()) -> dict:
+    """(magnitude, label) -> {"early": [successes, n], "late": [...]} over bumped rows (but
+    those of `skip_blocks`); a row is late when its seed's bump came at or after `split` s."""
     out: dict = defaultdict(lambda: {"early": [0, 0], "late": [0, 0]})
     for r in rows:
-        if not r.get(MAG) or float(r[MAG]) <= 0 or r.get("status", "ok") != "ok":
+        if not r.get(MAG) or float(r[MAG]) <= 0 or r.get("status", "ok") != "ok" \
+                or r.get("block") in skip_blocks:
             continue
         side = "late" if times(int(r["seed"])) >= split else "early"
         cell = out[(float(r[MAG]), r["label"])][side]
@@ -73,7 +75,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     ap.add_argument("--results", nargs="+", required=True, help="study results.csv files")
     ap.add_argument("--oracle", help="an oracle feasibility CSV (studies/oracle_feasibility.py)")
-    ap.add_argument("--split", type=float, default=23.0, help="bump time (s) late starts at")
+    ap.add_argument("--split", type=float, default=20.0,
+                    help="bump time (s) late starts at (default 20: the window's middle)")
+    ap.add_argument("--skip-block", action="append", default=[],
+                    help="leave this block's rows out (repeatable; e.g. a longer budget's)")
     a = ap.parse_args(argv)
     rows = []
     for path in a.results:
@@ -83,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as e:
             print(f"bump_time_split: cannot read {path}: {e.strerror}", file=sys.stderr)
             return 2
-    counts = split_counts(rows, a.split)
+    counts = split_counts(rows, a.split, skip_blocks=tuple(a.skip_block))
     print(f"| bump (N) | controller | bump < {a.split:g} s | bump >= {a.split:g} s | Fisher p |")
     print("|---|---|---|---|---|")
     for (m, label), c in sorted(counts.items()):

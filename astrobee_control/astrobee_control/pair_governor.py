@@ -76,6 +76,11 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   0.2-0.35 rad/s). Neither kept (thirteenth session, studies/late_bumps.yaml): unwind_rate pair
   flew exactly gov_uw's outcomes (7.5 N seeds 180-219 25/40, 5 N seeds 0-19 16/20); with
   unwind_coast 0.35 25/40 (6 gained, 6 lost) and 17/20 (1 gained);
+- gov_full = gov_uw + brake_share 1.0 (studies/late_bumps.yaml, pre-registered, fresh seeds
+  340-379): 7.5 N 23/40 vs PD 9/40 (p = 0.0013), 10 N 23/40 vs 4/40 (p = 3.8e-6; 1 contact
+  flight vs 4), 5 N 35/40: against gov_uw on the same flights 1 / 0, 4 / 6, 4 / 2 split seeds,
+  no difference. Both miss late bumps: slow, not unsafe (given a 90 s settle budget gov_uw
+  rests on 48 of 50 late-bumped dev flights, 25-42 s median past the plan's end);
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half

@@ -27,8 +27,9 @@ def test_split_counts_by_bump_time():
     times = {1: 12.0, 2: 25.0, 3: 23.0}.__getitem__
     rows = [row(1, "pd", 5.0, True), row(2, "pd", 5.0, False), row(3, "pd", 5.0, True),
             row(1, "gov", 5.0, True), row(1, "pd", 0.0, True),          # no bump: left out
-            {**row(2, "gov", 5.0, True), "status": "error"}]            # not flown: left out
-    c = mod.split_counts(rows, 23.0, times)
+            {**row(2, "gov", 5.0, True), "status": "error"},            # not flown: left out
+            {**row(2, "gov", 5.0, True), "block": "budget90"}]          # skipped below
+    c = mod.split_counts(rows, 23.0, times, skip_blocks=("budget90",))
     assert c == {(5.0, "pd"): {"early": [1, 1], "late": [1, 2]},
                  (5.0, "gov"): {"early": [1, 1], "late": [0, 0]}}
     assert mod.fisher_p([10, 10], [0, 10]) < 0.001 and mod.fisher_p([5, 10], [5, 10]) == 1.0
