@@ -1,6 +1,9 @@
 """Shared scenarios of the in-process lab tests: short hops inside Node 2 (a few seconds)."""
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import pytest
 
 from astrobee.scenario import Scenario
@@ -27,3 +30,15 @@ def make_hop():
 @pytest.fixture
 def rigid_hop() -> Scenario:
     return hop({"model": "rigid", "variant": "front", "mass": 10.0})
+
+
+@pytest.fixture
+def study_script():
+    """studies/<name>.py loaded as a module (the studies folder holds scripts, not a package)."""
+    def load(name: str):
+        path = Path(__file__).resolve().parents[2] / "studies" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    return load

@@ -1,20 +1,10 @@
 """studies/bump_time_split.py: flights split by their seed's bump time, counted per magnitude and
 controller; the oracle's feasibility split by its own bump_time column; a bad path one line."""
 import csv
-import importlib.util
-from pathlib import Path
 
 import pytest
 
 from astrobee_lab.oracle.solve import bump_of_seed
-
-
-def load_script():
-    path = Path(__file__).resolve().parents[2] / "studies" / "bump_time_split.py"
-    spec = importlib.util.spec_from_file_location("bump_time_split", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def row(seed: int, label: str, mag: float, ok: bool) -> dict:
@@ -22,8 +12,8 @@ def row(seed: int, label: str, mag: float, ok: bool) -> dict:
             "success": str(ok), "status": "ok"}
 
 
-def test_split_counts_by_bump_time():
-    mod = load_script()
+def test_split_counts_by_bump_time(study_script):
+    mod = study_script("bump_time_split")
     times = {1: 12.0, 2: 25.0, 3: 23.0}.__getitem__
     rows = [row(1, "pd", 5.0, True), row(2, "pd", 5.0, False), row(3, "pd", 5.0, True),
             row(1, "gov", 5.0, True), row(1, "pd", 0.0, True),          # no bump: left out
@@ -35,14 +25,14 @@ def test_split_counts_by_bump_time():
     assert mod.fisher_p([10, 10], [0, 10]) < 0.001 and mod.fisher_p([5, 10], [5, 10]) == 1.0
 
 
-def test_bump_time_is_the_simulators_draw_whatever_the_magnitude():
-    mod = load_script()
+def test_bump_time_is_the_simulators_draw_whatever_the_magnitude(study_script):
+    mod = study_script("bump_time_split")
     assert mod.bump_time(276) == pytest.approx(bump_of_seed(276, 7.5).time)
     assert 10.0 <= mod.bump_time(276) <= 30.0
 
 
-def test_oracle_counts_and_the_table(tmp_path, capsys):
-    mod = load_script()
+def test_oracle_counts_and_the_table(study_script, tmp_path, capsys):
+    mod = study_script("bump_time_split")
     oracle = [{"magnitude": "10.0", "bump_time": "27.9", "feasible": "True"},
               {"magnitude": "10.0", "bump_time": "10.3", "feasible": "False"}]
     assert mod.oracle_counts(oracle, 23.0) == {10.0: {"early": [0, 1], "late": [1, 1]}}

@@ -1,7 +1,5 @@
 """studies/oracle_recovery.py's rows: a plan that is the planned leg itself reads as on the plan
 (no offset, no attitude error) with the wrench of each interval; an offset and a turn read back."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,16 +9,8 @@ from astrobee_control import pair_model as pm
 from astrobee_lab.oracle import solve as so
 
 
-def load_script():
-    path = Path(__file__).resolve().parents[2] / "studies" / "oracle_recovery.py"
-    spec = importlib.util.spec_from_file_location("oracle_recovery", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_recovery_rows_read_the_plan_back():
-    rec = load_script()
+def test_recovery_rows_read_the_plan_back(study_script):
+    rec = study_script("oracle_recovery")
     params = pm.load("fem_bumped")
     leg = so.plan_leg("node2_to_jem_bag")
     t = np.array([10.0, 10.5, 11.0])
