@@ -23,6 +23,8 @@ from astrobee_lab.oracle.solve import bump_of_seed
 from astrobee_lab.study.stats import wilson
 
 MAG = "realism.disturbances.0.magnitude"
+RESULT_COLUMNS = ("seed", "label", "success", MAG)
+ORACLE_COLUMNS = ("magnitude", "bump_time", "feasible")
 
 
 def bump_time(seed: int, cache: dict[int, float] = {}) -> float:    # noqa: B006 (a memo)
@@ -66,6 +68,17 @@ def fisher_p(a: list[int], b: list[int]) -> float:
     return float(fisher_exact([[a[0], a[1] - a[0]], [b[0], b[1] - b[0]]])[1])
 
 
+def read_csv(path: str, columns: tuple) -> list[dict]:
+    """A CSV's rows as dicts (OSError when it cannot be read, KeyError naming the first of
+    `columns` it lacks)."""
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [c for c in columns if c not in (reader.fieldnames or ())]
+        if missing:
+            raise KeyError(missing[0])
+        return list(reader)
+
+
 def cell(c: list[int]) -> str:
     lo, hi = wilson(c[0], c[1])
     return f"{c[0]}/{c[1]} ({100 * lo:.0f}-{100 * hi:.0f}%)" if c[1] else "-"
@@ -80,26 +93,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--skip-block", action="append", default=[],
                     help="leave this block's rows out (repeatable; e.g. a longer budget's)")
     a = ap.parse_args(argv)
-    rows = []
-    for path in a.results:
-        try:
-            with open(path, newline="") as f:
-                rows += list(csv.DictReader(f))
-        except OSError as e:
-            print(f"bump_time_split: cannot read {path}: {e.strerror}", file=sys.stderr)
-            return 2
-    counts = split_counts(rows, a.split, skip_blocks=tuple(a.skip_block))
+    try:
+        rows = [r for path in a.results for r in read_csv(path, RESULT_COLUMNS)]
+        counts = split_counts(rows, a.split, skip_blocks=tuple(a.skip_block))
+        oc = oracle_counts(read_csv(a.oracle, ORACLE_COLUMNS), a.split) if a.oracle else {}
+    except OSError as e:
+        print(f"bump_time_split: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
+        return 2
+    except (KeyError, ValueError) as e:
+        print(f"bump_time_split: not a study's results.csv or an oracle feasibility CSV "
+              f"(column {e} missing or unreadable)", file=sys.stderr)
+        return 2
     print(f"| bump (N) | controller | bump < {a.split:g} s | bump >= {a.split:g} s | Fisher p |")
     print("|---|---|---|---|---|")
     for (m, label), c in sorted(counts.items()):
         print(f"| {m:g} | {label} | {cell(c['early'])} | {cell(c['late'])} | "
               f"{fisher_p(c['early'], c['late']):.2g} |")
-    if a.oracle:
-        with open(a.oracle, newline="") as f:
-            oc = oracle_counts(list(csv.DictReader(f)), a.split)
-        for m, c in sorted(oc.items()):
-            print(f"| {m:g} | oracle feasible (all its seeds) | {cell(c['early'])} | "
-                  f"{cell(c['late'])} | |")
+    for m, c in sorted(oc.items()):
+        print(f"| {m:g} | oracle feasible (all its seeds) | {cell(c['early'])} | "
+              f"{cell(c['late'])} | |")
     return 0
 
 

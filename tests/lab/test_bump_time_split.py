@@ -53,3 +53,9 @@ def test_oracle_counts_and_the_table(study_script, tmp_path, capsys):
     assert mod.main(["--results", str(tmp_path / "missing.csv")]) == 2
     err = capsys.readouterr().err
     assert "cannot read" in err and err.count("\n") == 1
+    assert mod.main(["--results", str(res), "--oracle", str(tmp_path / "none.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot read" in err and "none.csv" in err and err.count("\n") == 1
+    assert mod.main(["--results", str(orc)]) == 2           # the oracle's CSV as results
+    err = capsys.readouterr().err
+    assert "not a study's results.csv" in err and err.count("\n") == 1
