@@ -18,6 +18,7 @@ import argparse
 import csv
 import sys
 from collections import defaultdict
+from functools import lru_cache
 
 from astrobee_lab.oracle.solve import bump_of_seed
 from astrobee_lab.study.stats import wilson
@@ -27,11 +28,10 @@ RESULT_COLUMNS = ("seed", "label", "success", MAG)
 ORACLE_COLUMNS = ("magnitude", "bump_time", "feasible")
 
 
-def bump_time(seed: int, cache: dict[int, float] = {}) -> float:    # noqa: B006 (a memo)
+@lru_cache(maxsize=None)
+def bump_time(seed: int) -> float:
     """The seed's bump time (s): the draw does not depend on the magnitude."""
-    if seed not in cache:
-        cache[seed] = bump_of_seed(seed, 1.0).time
-    return cache[seed]
+    return bump_of_seed(seed, 1.0).time
 
 
 def split_counts(rows: list[dict], split: float, times=bump_time,
