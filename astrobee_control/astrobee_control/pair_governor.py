@@ -180,6 +180,9 @@ class GovConfig:
     lever_use: str = "help"      # with lever: "help" (the force may be bent to make torque,
                                  # allocation.allocate) or "guard" (it only stops opposing a
                                  # saturated attitude torque, allocation.guard)
+    hold_lever_use: str = "same"  # ... while stopping and holding at the goal ("same": as
+                                 # lever_use; "guard": the return force stops opposing the
+                                 # turn upright, it is not bent to make torque there)
     lever_from: str = "grasp"    # the lever's point with `track: robot`: the grasp (the bag
                                  # follows on its joint) or the observed bag ("bag": the pair
                                  # rigid as it is now, a folded bag's centre included)
@@ -200,6 +203,10 @@ class GovConfig:
                                  # is capped at this, so a pair far off its goal comes back at
                                  # ~ Kp/Kd x this with a small force, whose torque about the
                                  # pair's centre the attitude loop can hold (0: no cap)
+    hold_error_upright: float = 0.0  # m: ... and once the pair is upright (attitude error
+                                 # below half the mode's tolerance; ramped up to it from the
+                                 # tolerance), so a pair carried far off comes home at the
+                                 # mode's speed, not Kp/Kd x hold_error (0: hold_error)
     clearance: float = 0.0       # m: the force weight grows as (this / predicted clearance)^2
                                  # below it: the bag's corners and the robot's faces, each
                                  # carried on by its velocity for the time the force limits
@@ -261,6 +268,10 @@ class GovConfig:
             elif f.name == "lever_use":
                 if v not in LEVER_USES:
                     raise ValueError(f"lever_use must be one of {', '.join(LEVER_USES)}, got {v!r}")
+            elif f.name == "hold_lever_use":
+                if v not in ("same",) + LEVER_USES:
+                    raise ValueError(f"hold_lever_use must be one of same, "
+                                     f"{', '.join(LEVER_USES)}, got {v!r}")
             elif f.name == "lever_from":
                 if v not in LEVER_FROM:
                     raise ValueError(f"lever_from must be one of {', '.join(LEVER_FROM)}, "
@@ -569,9 +580,14 @@ class GovController:
         elif cfg.track == "centre" and self.bag is not None:
             ec_p, ec_v = self.centre_errors(state, ref, R)
         if cfg.hold_error > 0 and not self.following:
+            cap = cfg.hold_error
+            if cfg.hold_error_upright > 0:
+                up = ramp(rot.angle_between(q, ref.orientation), 0.5 * fm.tolerance_att,
+                          fm.tolerance_att)
+                cap += up * (cfg.hold_error_upright - cfg.hold_error)
             size = float(np.linalg.norm(ec_p))
-            if size > cfg.hold_error:
-                ec_p = ec_p * (cfg.hold_error / size)
+            if size > cap:
+                ec_p = ec_p * (cap / size)
         a_w = np.asarray(ref.accel, float) + fm.pos_kp * ec_p + fm.vel_kd * ec_v
         f_des = R.T @ (M * a_w)
         e_att = rot.attitude_error(q, ref.orientation)
@@ -607,11 +623,14 @@ class GovController:
             if drift > 0 and self.bag is not None and self.bag.mass > 0:
                 v_off = float(np.linalg.norm(self.centre_errors(state, ref, R)[1]))
                 w_f = max(w_f, (v_off / drift) ** 2)
-            if cfg.clearance > 0 and cfg.lever and cfg.lever_use == "help" \
+            use = cfg.lever_use
+            if not self.following and cfg.hold_lever_use != "same":
+                use = cfg.hold_lever_use
+            if cfg.clearance > 0 and cfg.lever and use == "help" \
                     and self.bag is not None and self.bag.mass > 0:   # w_f weighs only the lever
                 d = self.predicted_clearance(state, ref)
                 w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
-            if cfg.lever and cfg.lever_use == "guard":
+            if cfg.lever and use == "guard":
                 force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
             else:
                 w_t = cfg.w_torque * (1.0 if self.following else cfg.hold_torque_scale)

@@ -176,6 +176,8 @@ def test_registered():
     ({"unwind": "yes"}, "unwind must be true or false"),
     ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
+    ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard"),
+    ({"hold_error_upright": -0.4}, "hold_error_upright must be a finite number >= 0"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:
@@ -366,6 +368,56 @@ def test_hold_error_brings_a_far_pair_back_slowly():
     # within the cap nothing changes
     near = {"hold_error": 5.0}
     np.testing.assert_allclose(holding_force(near, 0.1), holding_force({}, 0.1))
+
+
+def hold_turned(params: dict, v: float, pitch: float,
+                goal: tuple = (2.0, 0.0, 0.0)):
+    """The output of the law holding `goal` (the pair at the origin), pitched `pitch` rad off
+    the goal's attitude and moving along +x at v m/s (the bag carried along)."""
+    law = make_gov_law(FM, mp.robot(), {"lever": True, "lever_from": "bag", **params})
+    q = rot.from_rotvec(np.array([0.0, pitch, 0.0]))
+    st = State(np.zeros(3), np.array([v, 0.0, 0.0]), q, np.zeros(3))
+    law.observe_bag(bag_at(st), st)
+    law.update(State(np.array(goal, float), np.zeros(3), Q, np.zeros(3)), 0.0, 0.016)  # holds
+    law.observe_bag(bag_at(st), st)
+    return law.update(st, 0.016, 0.016).output
+
+
+def test_hold_error_upright_brings_an_upright_pair_home_at_the_mode_speed():
+    """`hold_error_upright`: upright, 2 m off the goal and coming back at 0.1 m/s, the loop
+    still pushes towards the goal (the cap is Kp / Kd x 0.4 = 0.2 m/s, the nominal mode's
+    speed) and lets the pair coast at 0.2 m/s; turned past the mode's attitude tolerance the
+    cap is hold_error's, as without it."""
+    up = {"hold_error": 0.2, "hold_error_upright": 0.4}
+    assert holding_force(up, 0.1)[0] > 0.05 * FM.max_force[0]
+    assert np.linalg.norm(holding_force(up, 0.2)) < 1e-9
+    assert FM.pos_kp[0] / FM.vel_kd[0] * 0.4 == pytest.approx(FM.hard_limit_vel, abs=1e-9)
+    tilt = 1.2 * FM.tolerance_att
+    np.testing.assert_allclose(hold_turned(up, 0.1, tilt).force,
+                               hold_turned({"hold_error": 0.2}, 0.1, tilt).force, atol=1e-12)
+
+
+def test_hold_lever_use_guard_stops_the_return_from_fighting_the_turn_upright():
+    """`hold_lever_use: guard`: the pair held 5 cm past its goal (the traced 5 N failures came
+    back from 1-1.7 m past it), pitched 0.2 rad, the pitch torque saturated: where the
+    allocation weighs the route over the torque (near the JEM's walls the clearance weight
+    does; here a small w_torque) the return force's torque about the pair's centre takes from
+    the pitch torque, or turns the pair the wrong way; with the guard the whole limit turns it
+    upright. Along the route (a segment followed) the option changes nothing."""
+    for pitch in (0.2, -0.2):
+        about = {}
+        for name, params in (("guard", {"hold_lever_use": "guard"}), ("same", {})):
+            out = hold_turned({"w_torque": 0.01, **params}, 0.0, pitch, (-0.05, 0.0, 0.0))
+            assert abs(out.attitude_error[1]) == pytest.approx(0.2, abs=1e-9)
+            want = np.sign(out.alpha[1])
+            about[name] = want * (out.torque[1] - np.cross(centre_lever(), out.force)[1])
+        assert about["guard"] >= FM.max_torque[1] - 1e-12
+        assert about["same"] < FM.max_torque[1] - 0.005      # measured 0.024 and -0.015
+    q = rot.from_rotvec(np.array([0.0, 0.6, 0.0]))
+    st = State(np.zeros(3), np.zeros(3), q, np.zeros(3))
+    ref = Reference(np.array([0.0, 0.05, 0.02]), np.zeros(3), orientation=Q)
+    assert lever_bend(st, ref, {"hold_lever_use": "guard"})[0] == pytest.approx(
+        lever_bend(st, ref, {})[0])
 
 
 def test_drift_speed_keeps_the_force_on_the_route_while_the_pair_drifts():
