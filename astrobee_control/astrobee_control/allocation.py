@@ -120,6 +120,26 @@ def guard(f_des: np.ndarray, tau_des: np.ndarray, lever: np.ndarray, f_lim: np.n
     return F, tau
 
 
+def keep_along(F: np.ndarray, tau: np.ndarray, f_des: np.ndarray, u: np.ndarray,
+               tau_des: np.ndarray, lever: np.ndarray, f_lim: np.ndarray, t_lim: np.ndarray,
+               brake_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(F, tau): the allocated wrench with its force's component along the unit body
+    direction u (the route's) put back to the wanted force's (brake_only: only where the
+    allocation pushed further along u than wanted, so the lever may slow the pair but never
+    carry it ahead of its route), clipped to the box, and tau the body torque that then best
+    meets tau_des about the pair's centre (unchanged when the force is). A force bent along the
+    route to turn the pair costs distance the pair must come back over before the budget ends;
+    across the route the walls (the clearance weight) bound it."""
+    F, u = np.asarray(F, float), np.asarray(u, float)
+    f_lim, t_lim = np.asarray(f_lim, float), np.asarray(t_lim, float)
+    want = float(np.clip(np.asarray(f_des, float), -f_lim, f_lim) @ u)
+    have = float(F @ u)
+    if (brake_only and have <= want) or have == want:
+        return F, np.asarray(tau, float)
+    F = np.clip(F + (want - have) * u, -f_lim, f_lim)
+    return F, np.clip(np.asarray(tau_des, float) + np.cross(lever, F), -t_lim, t_lim)
+
+
 def cost(F: np.ndarray, tau: np.ndarray, f_des: np.ndarray, tau_des: np.ndarray,
          lever: np.ndarray, f_lim: np.ndarray, t_lim: np.ndarray, w_force: float = 1.0,
          w_torque: float = 30.0) -> float:

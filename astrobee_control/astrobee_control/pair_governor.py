@@ -157,6 +157,7 @@ from .tracking import CONTROLLING, STOPPING, Tracker
 
 INERTIAS = ("robot", "pivot", "rigid", "centre")
 LEVER_USES = ("help", "guard")
+LEVER_ALONG = ("free", "brake", "route")
 TRACKED = ("robot", "centre")
 LEVER_FROM = ("grasp", "bag")
 CLEARANCE_MOTIONS = ("points", "drift")
@@ -180,6 +181,11 @@ class GovConfig:
     lever_use: str = "help"      # with lever: "help" (the force may be bent to make torque,
                                  # allocation.allocate) or "guard" (it only stops opposing a
                                  # saturated attitude torque, allocation.guard)
+    lever_along: str = "free"    # with lever while a segment is followed: the force's
+                                 # component along the route is the allocation's ("free"), at
+                                 # most the position loop's ("brake": the lever may slow the
+                                 # pair, never push it ahead) or the loop's ("route"); across
+                                 # the route the lever bends it freely (allocation.keep_along)
     hold_lever_use: str = "same"  # ... while stopping and holding at the goal ("same": as
                                  # lever_use; "guard": the return force stops opposing the
                                  # turn upright, it is not bent to make torque there)
@@ -268,6 +274,10 @@ class GovConfig:
             elif f.name == "lever_use":
                 if v not in LEVER_USES:
                     raise ValueError(f"lever_use must be one of {', '.join(LEVER_USES)}, got {v!r}")
+            elif f.name == "lever_along":
+                if v not in LEVER_ALONG:
+                    raise ValueError(f"lever_along must be one of {', '.join(LEVER_ALONG)}, "
+                                     f"got {v!r}")
             elif f.name == "hold_lever_use":
                 if v not in ("same",) + LEVER_USES:
                     raise ValueError(f"hold_lever_use must be one of same, "
@@ -636,6 +646,12 @@ class GovController:
                 w_t = cfg.w_torque * (1.0 if self.following else cfg.hold_torque_scale)
                 force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
                                                     w_f, w_t * share)
+                v_ref = np.asarray(ref.velocity, float)
+                speed = float(np.linalg.norm(v_ref))
+                if cfg.lever and cfg.lever_along != "free" and self.following and speed > 0.01:
+                    force, torque = allocation.keep_along(
+                        force, torque, f_des, R.T @ (v_ref / speed), tau_des, lever, f_lim, t_lim,
+                        brake_only=cfg.lever_along == "brake")
         else:
             force, torque = np.zeros(3), np.zeros(3)
         return Output(force=force, torque=torque, accel=R.T @ a_w, alpha=al_b,

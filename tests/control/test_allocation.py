@@ -111,3 +111,47 @@ def test_guard_does_not_bend_the_force_for_torque():
     F, tau = al.guard(np.zeros(3), tau_des, LEVER, F_LIM, T_LIM)
     np.testing.assert_allclose(F, 0.0, atol=1e-15)
     assert tau[1] == pytest.approx(T_LIM[1])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_keep_along_never_pushes_ahead_of_the_route(seed):
+    """keep_along on allocate's wrench for random wanted wrenches and route directions:
+    brake_only leaves the force along the route at most the wanted (boxed) force's and, where
+    allocate pushed no further than that, the wrench untouched; route mode puts it back to the
+    wanted one up to the box; the across-route part is allocate's (up to the box); the torque
+    is the exact best for the kept force."""
+    rng = np.random.default_rng(seed)
+    f_des = rng.uniform(-1.5, 1.5, 3) * F_LIM
+    tau_des = rng.uniform(-4, 4, 3) * T_LIM
+    u = rng.normal(size=3)
+    u /= np.linalg.norm(u)
+    F0, tau0 = al.allocate(f_des, tau_des, LEVER, F_LIM, T_LIM, 1.0, 3.0)
+    want = float(np.clip(f_des, -F_LIM, F_LIM) @ u)
+    F, tau = al.keep_along(F0, tau0, f_des, u, tau_des, LEVER, F_LIM, T_LIM, brake_only=True)
+    assert np.all(np.abs(F) <= F_LIM + 1e-12)
+    if F0 @ u <= want:
+        np.testing.assert_array_equal(F, F0)
+        np.testing.assert_array_equal(tau, tau0)
+    else:
+        assert F @ u <= want + 1e-9 or np.any(np.abs(np.abs(F) - F_LIM) < 1e-12)
+        assert F @ u < F0 @ u
+        np.testing.assert_allclose(tau, np.clip(tau_des + np.cross(LEVER, F), -T_LIM, T_LIM),
+                                   atol=1e-12)
+    Fr, _ = al.keep_along(F0, tau0, f_des, u, tau_des, LEVER, F_LIM, T_LIM, brake_only=False)
+    unclipped = F0 + (want - F0 @ u) * u
+    if np.all(np.abs(unclipped) <= F_LIM):
+        assert Fr @ u == pytest.approx(want, abs=1e-12)
+        np.testing.assert_allclose(Fr - (Fr @ u) * u, F0 - (F0 @ u) * u, atol=1e-12)
+
+
+def test_keep_along_stops_the_lever_pushing_a_braking_pair_ahead():
+    """The traced 5 N failure (seed 348, 34 s): the route wants 1 N of braking (-x, the route
+    along +x) while the pair, pitched, wants more torque than the limit; allocate pushes the
+    pair ahead (+0.68 N along x) to make torque through the lever; kept along the route, the
+    force brakes at the limit and only its across-route part helps the turn."""
+    f_des, tau_des = np.array([-1.0, 0.0, 0.0]), np.array([0.0, 10 * T_LIM[1], 0.0])
+    F0, tau0 = al.allocate(f_des, tau_des, LEVER, F_LIM, T_LIM, 1.0, 3.0)
+    assert F0[0] > 0.5 * F_LIM[0]
+    F, _ = al.keep_along(F0, tau0, f_des, np.array([1.0, 0, 0]), tau_des, LEVER, F_LIM, T_LIM)
+    assert F[0] == pytest.approx(-F_LIM[0])
+    assert F[2] == pytest.approx(F0[2])

@@ -176,6 +176,7 @@ def test_registered():
     ({"unwind": "yes"}, "unwind must be true or false"),
     ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
+    ({"lever_along": "push"}, "lever_along must be one of free, brake, route"),
     ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard"),
     ({"hold_error_upright": -0.4}, "hold_error_upright must be a finite number >= 0"),
 ])
@@ -418,6 +419,26 @@ def test_hold_lever_use_guard_stops_the_return_from_fighting_the_turn_upright():
     ref = Reference(np.array([0.0, 0.05, 0.02]), np.zeros(3), orientation=Q)
     assert lever_bend(st, ref, {"hold_lever_use": "guard"})[0] == pytest.approx(
         lever_bend(st, ref, {})[0])
+
+
+def test_lever_along_brake_never_pushes_the_pair_ahead_of_its_route():
+    """`lever_along: brake`: following a segment along +x, the pair 2 cm ahead of its reference
+    and 0.05 m/s too fast (the route wants braking) and pitched 0.3 rad: the free lever pushes
+    the pair on along the route to turn it (the traced 5 N overshoots, 1.1-1.7 m past the
+    goal); kept, the force along the route brakes; `route` keeps it at the loop's too."""
+    q = rot.from_rotvec(np.array([0.0, -0.3, 0.0]))
+    st = State(np.zeros(3), np.array([0.2, 0.0, 0.0]), q, np.zeros(3))
+    ref = Reference(np.array([-0.02, 0.0, 0.0]), np.array([0.15, 0.0, 0.0]), orientation=Q)
+    R = rot.to_matrix(q)
+    along = {}
+    for name in ("free", "brake", "route"):
+        law = lever_bend(st, ref, {"lever_along": name})[1]
+        along[name] = float((R @ law.pd.step(st, ref, 0.016).force)[0])
+    assert along["free"] > 0.5                       # measured 0.77 N ahead
+    assert along["brake"] < -0.5 and along["route"] < -0.5      # measured -0.67 N
+    # holding at the goal it does nothing (no route to keep to)
+    assert lever_bend(st, ref, {"lever_along": "brake"}, following=False)[0] == \
+        pytest.approx(lever_bend(st, ref, {}, following=False)[0])
 
 
 def test_drift_speed_keeps_the_force_on_the_route_while_the_pair_drifts():
