@@ -37,9 +37,17 @@ def main() -> None:
     ap.add_argument("--magnitudes", type=float, nargs="*", default=list(MAGNITUDES))
     ap.add_argument("--pair", default="fem", help="the pair parameters (config/reduced_models.yaml "
                     "`pair:`): fem (the study's), fem_bumped (fitted on bumped flights)")
+    ap.add_argument("--seed-list", type=int, nargs="*", help="these seeds (instead of "
+                    "--first-seed .. --seeds)")
+    ap.add_argument("--margin", type=float, default=so.MARGIN, help="the share of the terminal "
+                    "set's thresholds the NLP asks for (a variant: give it its own --out)")
+    ap.add_argument("--mode-limits", action="store_true", help="the robot's speed and rate "
+                    "also within the flight mode's hard limits (a variant: give it its own --out)")
     ap.add_argument("--table", action="store_true", help="only print the table of the study files "
                     "(with --out naming a variant's CSV: that file's)")
     a = ap.parse_args()
+    if not 0 < a.margin <= 1:
+        ap.error(f"--margin must be in (0, 1], got {a.margin}")
     study = study_files(os.path.dirname(a.out) or ".")
     if a.table:                         # a variant's CSV is read alone, the study's files together
         table(*(study if Path(a.out) in study or not os.path.exists(a.out) else [a.out]))
@@ -55,16 +63,17 @@ def main() -> None:
             done = {(float(r["magnitude"]), int(r["seed"])) for r in csv.DictReader(f)}
     new = not os.path.exists(a.out)
     with open(a.out, "a", newline="") as f:
-        w = csv.DictWriter(f, FIELDS)
+        w = csv.DictWriter(f, FIELDS + (["speed_max", "rate_max"] if a.mode_limits else []))
         if new:
             w.writeheader()
-        for seed in range(a.first_seed, a.seeds):          # seed-major: a partial run covers every size
+        seeds = a.seed_list if a.seed_list else range(a.first_seed, a.seeds)
+        for seed in seeds:          # seed-major: a partial run covers every size
             for mag in a.magnitudes:
                 if (mag, seed) in done:
                     continue
                 b = so.bump_of_seed(seed, mag)
                 t = time.perf_counter()
-                r = so.solve(leg, params, b)
+                r = so.solve(leg, params, b, mode_limits=a.mode_limits, margin=a.margin)
                 row = {"magnitude": mag, "seed": seed, "bump_time": b.time,
                        "fx": round(b.force[0], 4), "fy": round(b.force[1], 4),
                        "fz": round(b.force[2], 4), **r.row()}

@@ -89,3 +89,24 @@ def test_a_replan_from_a_mid_state_warm_starts_and_stays_feasible():
     again = so.solve(leg, p, None, budget=12.0, t0=float(first.t[k]), x0=first.x[k], guess=first, jit=False)
     assert again.feasible, again.row()
     assert again.t[0] == first.t[k] and np.allclose(again.x[0], first.x[k])
+
+
+def test_mode_limits_bound_the_robots_speed_and_rate():
+    """mode_limits: the robot's speed and rate stay within the flight mode's hard limits at
+    every node (after the bump). A start already faster than the mode allows (0.25 m/s towards
+    a goal 1 m away, 0.2 m/s allowed) cannot get under it by the next node: infeasible with
+    the limits, feasible without; a planted move within them is feasible with them too."""
+    p = pm.PairParams()
+    mode = flight_modes.get("nominal")
+    x0 = pm.state(START, np.array([0.0, -0.25, 0.0]), Q, np.zeros(3), Q, np.zeros(3))
+    leg = _leg(np.array([0.0, -1.0, 0.0]))
+    free = so.solve(leg, p, None, budget=14.0, x0=x0, jit=False)
+    held = so.solve(leg, p, None, budget=14.0, x0=x0, jit=False, mode_limits=True)
+    assert free.feasible, free.row()
+    assert not held.feasible
+    assert held.violation["speed_max"] > mode.hard_limit_vel * (1 + so.LIMIT_TOL)
+    calm = so.solve(_leg(np.array([0.0, -0.35, 0.0])), p, None, budget=12.0, x0=_start(p),
+                    jit=False, mode_limits=True)
+    assert calm.feasible, calm.row()
+    assert calm.violation["speed_max"] <= mode.hard_limit_vel * (1 + so.LIMIT_TOL)
+    assert calm.violation["rate_max"] <= mode.hard_limit_omega * (1 + so.LIMIT_TOL)

@@ -30,6 +30,9 @@ from astrobee_control import pair_model as pm
 
 MARGIN = 0.8                             # the NLP asks for 80% of the rest thresholds
 BOX_TOL = 1e-3                           # m a point may sit outside its box and still count
+LIMIT_AFTER = 1.0                        # s after the bump's end the mode's limits start
+LIMIT_TOL = 1e-2                         # share a node's speed / rate may exceed the mode's
+                                         # hard limit and still count (mode_limits)
 BAG_MARGIN = 0.05                        # m the bag's corners keep from the walls: flown with
                                          # 0, the oracle's plans rode the bag along a wall
                                          # and the FEM bag touched it (bench/oracle_fly.py)
@@ -157,14 +160,17 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
           substep: float = 0.25, max_iter: int = 600, lag: float | None = None,
           x0: np.ndarray | None = None, jit: bool = True,
           bag_margin: float = BAG_MARGIN, guess: "OracleResult | None" = None,
-          margin: float = MARGIN) -> OracleResult:
+          margin: float = MARGIN, mode_limits: bool = False) -> OracleResult:
     """Solve the oracle's problem (module docstring). t0: the window's start (default: `lead`
     s before the bump, or 0 without one); lag overrides params.lag; x0 the start state (default:
     the plan's at t0, planned_state); bag_margin (m) the bag's corners keep from the keep-in
     boxes' faces (the station's walls); guess: an earlier solution over this window (a replan)
     as the initial guess and for the box assignment instead of the planned leg; margin: the
     share of the terminal set's thresholds the NLP asks for (a plan to be flown wants room: the
-    effort cost otherwise ends it on the NLP's edge)."""
+    effort cost otherwise ends it on the NLP's edge); mode_limits: the robot's speed and body
+    rate also within the flight mode's hard limits (hard_limit_vel, hard_limit_omega: the limits
+    the laws plan their rates within) at every node from LIMIT_AFTER s after the bump's end;
+    by default only the wrench is bounded."""
     import casadi as ca
 
     from .model import casadi_points, casadi_step
@@ -213,6 +219,16 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
         effort += float(hs[k]) * ca.sumsqr(U[:, k] / lim)
     opti.subject_to(sb >= 0)
     opti.subject_to(st >= 0)
+    # from a second after the bump's end (what the bump itself leaves is not a plan)
+    limited = [k for k in range(1, N + 1)
+               if bump is None or ts[k] >= bump.time + bump.duration + LIMIT_AFTER - 1e-9]
+    if mode_limits:
+        sr = opti.variable(N + 1)      # rate / speed slack per node (squared units)
+        opti.subject_to(sr >= 0)
+        for k in limited:
+            opti.subject_to(ca.sumsqr(X[pm.V_R, k]) <= float(mode.hard_limit_vel) ** 2 + sr[k])
+            opti.subject_to(ca.sumsqr(X[pm.W_R, k]) <= float(mode.hard_limit_omega) ** 2 + sr[k])
+        opti.set_initial(sr, 0.0)
     term = [k for k in range(N + 1) if ts[k] >= t_end - hold - 1e-9]
     gq = leg.goal_orientation
     tol_p, tol_a = float(mode.tolerance_pos), float(mode.tolerance_att)
@@ -229,7 +245,8 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
             opti.subject_to(ca.sumsqr(xk[3:6]) <= (margin * REST_SPEED) ** 2 + st)
             opti.subject_to(ca.sumsqr(xk[10:13]) <= (margin * REST_OMEGA) ** 2 + st)
             opti.subject_to(ca.sumsqr(xk[17:20]) <= (margin * REST_OMEGA) ** 2 + st)
-    opti.minimize(1e3 * ca.sum1(sb) + 1e6 * st + 1e-2 * effort)
+    opti.minimize(1e3 * ca.sum1(sb) + 1e6 * st + 1e-2 * effort
+                  + (1e6 * ca.sum1(sr) if mode_limits else 0))
     opti.set_initial(X, X0.T)
     U0 = X0[:-1, pm.A] if guess is None else \
         guess.u[np.clip(np.searchsorted(guess.t, ts[:-1] + 1e-9, side="right") - 1, 0, len(guess.u) - 1)]
@@ -254,6 +271,11 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
     viol = violations(xs, ts, params, leg, robot_box, corner_box, corners, hold, t_end)
     ok = bool(np.all(np.isfinite(xs))) and viol["box"] <= BOX_TOL and viol["rest_speed"] < REST_SPEED \
         and viol["rest_omega"] < REST_OMEGA and viol["goal"] <= tol_p and viol["attitude"] <= tol_a
+    if mode_limits:
+        viol["speed_max"] = float(np.linalg.norm(xs[limited][:, pm.V_R], axis=1).max())
+        viol["rate_max"] = float(np.linalg.norm(xs[limited][:, pm.W_R], axis=1).max())
+        ok = ok and viol["speed_max"] <= float(mode.hard_limit_vel) * (1 + LIMIT_TOL) \
+            and viol["rate_max"] <= float(mode.hard_limit_omega) * (1 + LIMIT_TOL)
     return OracleResult(ok, status, solve_time, ts, xs, us, viol, bump)
 
 
