@@ -81,6 +81,16 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   flight vs 4), 5 N 35/40: against gov_uw on the same flights 1 / 0, 4 / 6, 4 / 2 split seeds,
   no difference. Both miss late bumps: slow, not unsafe (given a 90 s settle budget gov_uw
   rests on 48 of 50 late-bumped dev flights, 25-42 s median past the plan's end);
+- holding after a late bump (fourteenth session, studies/hold_return.yaml, dev seeds): traced
+  at 5 N (seeds 348, 358 of late_bumps) the lever carries the pair 1.1-1.7 m past the goal in
+  the plan's last 15 s, and holding there the return force's torque stalls the pitch at 0.2 rad
+  for ~20 s. `hold_lever_use: guard` (the guard allocation while stopping and holding) turns the
+  pair upright 15 s sooner but lets it drift into the JEM's walls (5 N: 13/26 with 10 contact
+  flights against gov_uw's 17/26 with none); `hold_error_upright` (the cap grows to this once
+  the pair is upright) 17/26 and 5/24 at 5 and 7.5 N, gov_uw's own outcomes, ~0.1 s sooner at
+  rest; `lever_along: brake` (the lever may not push the pair ahead of its route,
+  allocation.keep_along) 10/26 (2 / 9 against gov_uw): without the forward push the pair
+  turns over. None kept;
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
@@ -188,7 +198,9 @@ class GovConfig:
                                  # the route the lever bends it freely (allocation.keep_along)
     hold_lever_use: str = "same"  # ... while stopping and holding at the goal ("same": as
                                  # lever_use; "guard": the return force stops opposing the
-                                 # turn upright, it is not bent to make torque there)
+                                 # turn upright, it is not bent to make torque there;
+                                 # "guard_clear": the guard while the predicted clearance is
+                                 # at least `clearance`, else help with its weight)
     lever_from: str = "grasp"    # the lever's point with `track: robot`: the grasp (the bag
                                  # follows on its joint) or the observed bag ("bag": the pair
                                  # rigid as it is now, a folded bag's centre included)
@@ -279,9 +291,9 @@ class GovConfig:
                     raise ValueError(f"lever_along must be one of {', '.join(LEVER_ALONG)}, "
                                      f"got {v!r}")
             elif f.name == "hold_lever_use":
-                if v not in ("same",) + LEVER_USES:
+                if v not in ("same", "guard_clear") + LEVER_USES:
                     raise ValueError(f"hold_lever_use must be one of same, "
-                                     f"{', '.join(LEVER_USES)}, got {v!r}")
+                                     f"{', '.join(LEVER_USES)}, guard_clear, got {v!r}")
             elif f.name == "lever_from":
                 if v not in LEVER_FROM:
                     raise ValueError(f"lever_from must be one of {', '.join(LEVER_FROM)}, "
@@ -636,10 +648,12 @@ class GovController:
             use = cfg.lever_use
             if not self.following and cfg.hold_lever_use != "same":
                 use = cfg.hold_lever_use
-            if cfg.clearance > 0 and cfg.lever and use == "help" \
+            if cfg.clearance > 0 and cfg.lever and use in ("help", "guard_clear") \
                     and self.bag is not None and self.bag.mass > 0:   # w_f weighs only the lever
                 d = self.predicted_clearance(state, ref)
                 w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
+                if use == "guard_clear":          # the guard only with the walls clear
+                    use = "guard" if d >= cfg.clearance else "help"
             if cfg.lever and use == "guard":
                 force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
             else:

@@ -177,7 +177,7 @@ def test_registered():
     ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
     ({"lever_along": "push"}, "lever_along must be one of free, brake, route"),
-    ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard"),
+    ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard, guard_clear"),
     ({"hold_error_upright": -0.4}, "hold_error_upright must be a finite number >= 0"),
 ])
 def test_bad_parameters_one_line(params, words):
@@ -419,6 +419,31 @@ def test_hold_lever_use_guard_stops_the_return_from_fighting_the_turn_upright():
     ref = Reference(np.array([0.0, 0.05, 0.02]), np.zeros(3), orientation=Q)
     assert lever_bend(st, ref, {"hold_lever_use": "guard"})[0] == pytest.approx(
         lever_bend(st, ref, {})[0])
+
+
+def test_hold_lever_use_guard_clear_guards_only_with_the_walls_clear():
+    """`hold_lever_use: guard_clear`: holding as in the guard's test, the guard's wrench where
+    the predicted clearance is at least `clearance` (Node 2's middle, ~0.5 m) and the law's own
+    (help, with the clearance weight) near a wall (3 m towards the JEM, ~0.04 m) or outside
+    the station."""
+    q = rot.from_rotvec(np.array([0.0, 0.2, 0.0]))
+
+    def hold_at(use: str, p0: tuple) -> tuple:
+        law = make_gov_law(FM, mp.robot(), {"lever": True, "lever_from": "bag", "clearance": 0.3,
+                                            "w_torque": 0.01, "hold_lever_use": use})
+        st = State(np.array(p0, float), np.zeros(3), q, np.zeros(3))
+        law.observe_bag(bag_at(st), st)
+        law.update(State(st.position + [-0.05, 0.0, 0.0], np.zeros(3), Q, np.zeros(3)), 0.0,
+                   0.016)
+        law.observe_bag(bag_at(st), st)
+        return law.update(st, 0.016, 0.016).output.force, law.pd.predicted_clearance(st)
+
+    clear, near, outside = (10.95, 0.0, 4.84), (10.95, -3.0, 4.84), (0.0, 0.0, 0.0)
+    assert hold_at("same", clear)[1] > 0.3 > hold_at("same", near)[1]
+    np.testing.assert_allclose(hold_at("guard_clear", clear)[0], hold_at("guard", clear)[0])
+    assert np.linalg.norm(hold_at("guard", clear)[0] - hold_at("same", clear)[0]) > 0.01
+    for p0 in (near, outside):
+        np.testing.assert_allclose(hold_at("guard_clear", p0)[0], hold_at("same", p0)[0])
 
 
 def test_lever_along_brake_never_pushes_the_pair_ahead_of_its_route():
