@@ -86,7 +86,8 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   the plan's last 15 s, and holding there the return force's torque stalls the pitch at 0.2 rad
   for ~20 s. `hold_lever_use: guard` (the guard allocation while stopping and holding) turns the
   pair upright 15 s sooner but lets it drift into the JEM's walls (5 N: 13/26 with 10 contact
-  flights against gov_uw's 17/26 with none); `hold_error_upright` (the cap grows to this once
+  flights against gov_uw's 17/26 with none; `guard_clear`, only with the walls clear: 17/26
+  and 6/24 at 5 and 7.5 N, no contacts); `hold_error_upright` (the cap grows to this once
   the pair is upright) 17/26 and 5/24 at 5 and 7.5 N, gov_uw's own outcomes, ~0.1 s sooner at
   rest; `lever_along: brake` (the lever may not push the pair ahead of its route,
   allocation.keep_along) 10/26 (2 / 9 against gov_uw): without the forward push the pair
