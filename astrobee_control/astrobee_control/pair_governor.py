@@ -323,6 +323,11 @@ class GovConfig:
         for name in ("momentum", "hold_momentum"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)!r}")
+        if self.hold_lever_use == "guard_clear" and not (self.lever and self.clearance > 0):
+            raise ValueError("hold_lever_use guard_clear needs lever true and clearance > 0")
+        if self.hold_error_upright > 0 and not self.hold_error_upright >= self.hold_error > 0:
+            raise ValueError(f"hold_error_upright ({self.hold_error_upright}) needs hold_error > 0 "
+                             f"and at most itself, got hold_error {self.hold_error}")
         if not 0 < self.brake_share <= 1:
             raise ValueError(f"brake_share must be in (0, 1], got {self.brake_share!r}")
         if not 0 < self.stop_share <= 1:

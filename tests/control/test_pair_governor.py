@@ -179,6 +179,10 @@ def test_registered():
     ({"lever_along": "push"}, "lever_along must be one of free, brake, route"),
     ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard, guard_clear"),
     ({"hold_error_upright": -0.4}, "hold_error_upright must be a finite number >= 0"),
+    ({"hold_error_upright": 0.4}, "hold_error_upright (0.4) needs hold_error > 0"),
+    ({"hold_error_upright": 0.1, "hold_error": 0.2}, "and at most itself, got hold_error 0.2"),
+    ({"hold_lever_use": "guard_clear", "lever": True},
+     "hold_lever_use guard_clear needs lever true and clearance > 0"),
 ])
 def test_bad_parameters_one_line(params, words):
     with pytest.raises(ValueError) as err:

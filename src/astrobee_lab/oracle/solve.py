@@ -272,8 +272,9 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
     ok = bool(np.all(np.isfinite(xs))) and viol["box"] <= BOX_TOL and viol["rest_speed"] < REST_SPEED \
         and viol["rest_omega"] < REST_OMEGA and viol["goal"] <= tol_p and viol["attitude"] <= tol_a
     if mode_limits:
-        viol["speed_max"] = float(np.linalg.norm(xs[limited][:, pm.V_R], axis=1).max())
-        viol["rate_max"] = float(np.linalg.norm(xs[limited][:, pm.W_R], axis=1).max())
+        held = xs[limited] if limited else np.zeros((1, pm.NX))
+        viol["speed_max"] = float(np.linalg.norm(held[:, pm.V_R], axis=1).max())
+        viol["rate_max"] = float(np.linalg.norm(held[:, pm.W_R], axis=1).max())
         ok = ok and viol["speed_max"] <= float(mode.hard_limit_vel) * (1 + LIMIT_TOL) \
             and viol["rate_max"] <= float(mode.hard_limit_omega) * (1 + LIMIT_TOL)
     return OracleResult(ok, status, solve_time, ts, xs, us, viol, bump)
