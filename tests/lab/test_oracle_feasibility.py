@@ -39,3 +39,18 @@ def test_the_committed_study_rows_load():
     got = load_feasibility(root)
     assert len(got) >= 47 and {m for m, _ in got} == {2.5, 5.0, 7.5, 10.0}
     assert got[(7.5, 2)] is False and got[(5.0, 0)] is True
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--margin", "0"], "--margin must be in (0, 1], got 0.0"),
+    (["--margin", "1.5"], "--margin must be in (0, 1], got 1.5"),
+    (["--seed-list", "x"], "argument --seed-list: invalid int value: 'x'"),
+])
+def test_bad_arguments_are_one_line(study_script, monkeypatch, capsys, argv, words):
+    mod = study_script("oracle_feasibility")
+    monkeypatch.setattr("sys.argv", ["oracle_feasibility.py", *argv])
+    with pytest.raises(SystemExit) as e:
+        mod.main()
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert words in err[-1]
