@@ -65,11 +65,14 @@ def test_mission_chain_with_rigid_sim(tmp_path):
     assert "SUCCESS" in finalize(run, run / "bag")
     assert json.loads((run / "summary.json").read_text())["legs"][0]["plot_source"] == "recording"
 
-    from mcap_ros2.reader import read_ros2_messages
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
     topics = {}
     for f in sorted((run / "bag").glob("*.mcap")):
-        for m in read_ros2_messages(str(f)):
-            topics.setdefault(m.channel.topic, []).append(m.ros_msg)
+        with open(f, "rb") as fh:
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            for _, channel, _, msg in reader.iter_decoded_messages():
+                topics.setdefault(channel.topic, []).append(msg)
     seg = topics["/gnc/ctl/segment"][-1]
     assert len(seg.segment) > 10 and seg.flight_mode == "nominal"
     states = [m.state for m in topics["/mob/state"]]

@@ -121,11 +121,14 @@ def test_hop_on_rclpy_fastrtps(tmp_path):
     assert sum((a - b) ** 2 for a, b in zip(heard["last"], GOAL)) ** 0.5 < 0.2, heard
     assert all(p.poll() is not None for p in procs)
 
-    from mcap_ros2.reader import read_ros2_messages
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
     topics: dict = {}
     for f in sorted((run / "bag").glob("*.mcap")):
-        for m in read_ros2_messages(str(f)):          # every message decodes
-            topics.setdefault(m.channel.topic, []).append(m.ros_msg)
+        with open(f, "rb") as fh:
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            for _, channel, _, msg in reader.iter_decoded_messages():   # every one decodes
+                topics.setdefault(channel.topic, []).append(msg)
     assert {"/clock", "/tf", "/gnc/ctl/command", "/gnc/ctl/segment", "/mob/state",
             "/sim/scenario"} <= set(topics), sorted(topics)
     assert topics["/sim/bag/state"][-1].model == "rigid"
