@@ -85,13 +85,13 @@ on the robot (the route through the hatch is the robot's) and changes three thin
   at 5 N (seeds 348, 358 of late_bumps) the lever carries the pair 1.1-1.7 m past the goal in
   the plan's last 15 s, and holding there the return force's torque stalls the pitch at 0.2 rad
   for ~20 s. `hold_lever_use: guard` (the guard allocation while stopping and holding) turns the
-  pair upright 15 s sooner but lets it drift into the JEM's walls (5 N: 13/26 with 10 contact
-  flights against gov_uw's 17/26 with none; `guard_clear`, only with the walls clear: 17/26
-  and 6/24 at 5 and 7.5 N, no contacts); `hold_error_upright` (the cap grows to this once
-  the pair is upright) 17/26 and 5/24 at 5 and 7.5 N, gov_uw's own outcomes, ~0.1 s sooner at
-  rest; `lever_along: brake` (the lever may not push the pair ahead of its route,
-  allocation.keep_along) 10/26 (2 / 9 against gov_uw): without the forward push the pair
-  turns over. None kept;
+  pair upright 15 s sooner (traced on gov_full, seed 348) but lets it drift into the walls
+  (5 N: 13/26 with 10 contact flights against gov_uw's 17/26 with none; `guard_clear`, only
+  with the walls clear: 17/26 and 6/24 at 5 and 7.5 N, no contacts); `hold_error_upright`
+  (the cap grows to this once the pair is upright) 17/26 and 5/24 at 5 and 7.5 N, gov_uw's own
+  outcomes, ~0.1 s sooner at rest; `lever_along: brake` (the lever may not push the pair
+  ahead of its route, allocation.keep_along) 10/26 (2 / 9 against gov_uw): without the
+  forward push the pair turns over. None kept;
 - `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
   pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
   pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
