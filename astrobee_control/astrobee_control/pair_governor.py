@@ -169,6 +169,7 @@ from .tracking import CONTROLLING, STOPPING, Tracker
 INERTIAS = ("robot", "pivot", "rigid", "centre")
 LEVER_USES = ("help", "guard")
 LEVER_ALONG = ("free", "brake", "route")
+HOLD_LEVER_USES = ("same",) + LEVER_USES + ("guard_clear",)
 TRACKED = ("robot", "centre")
 LEVER_FROM = ("grasp", "bag")
 CLEARANCE_MOTIONS = ("points", "drift")
@@ -292,9 +293,9 @@ class GovConfig:
                     raise ValueError(f"lever_along must be one of {', '.join(LEVER_ALONG)}, "
                                      f"got {v!r}")
             elif f.name == "hold_lever_use":
-                if v not in ("same", "guard_clear") + LEVER_USES:
-                    raise ValueError(f"hold_lever_use must be one of same, "
-                                     f"{', '.join(LEVER_USES)}, guard_clear, got {v!r}")
+                if v not in HOLD_LEVER_USES:
+                    raise ValueError(f"hold_lever_use must be one of "
+                                     f"{', '.join(HOLD_LEVER_USES)}, got {v!r}")
             elif f.name == "lever_from":
                 if v not in LEVER_FROM:
                     raise ValueError(f"lever_from must be one of {', '.join(LEVER_FROM)}, "
@@ -666,12 +667,13 @@ class GovController:
                 w_t = cfg.w_torque * (1.0 if self.following else cfg.hold_torque_scale)
                 force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
                                                     w_f, w_t * share)
-                v_ref = np.asarray(ref.velocity, float)
-                speed = float(np.linalg.norm(v_ref))
-                if cfg.lever and cfg.lever_along != "free" and self.following and speed > 0.01:
-                    force, torque = allocation.keep_along(
-                        force, torque, f_des, R.T @ (v_ref / speed), tau_des, lever, f_lim, t_lim,
-                        brake_only=cfg.lever_along == "brake")
+                if cfg.lever and cfg.lever_along != "free" and self.following:
+                    v_ref = np.asarray(ref.velocity, float)
+                    speed = float(np.linalg.norm(v_ref))
+                    if speed > 0.01:
+                        force, torque = allocation.keep_along(
+                            force, torque, f_des, R.T @ (v_ref / speed), tau_des, lever, f_lim,
+                            t_lim, brake_only=cfg.lever_along == "brake")
         else:
             force, torque = np.zeros(3), np.zeros(3)
         return Output(force=force, torque=torque, accel=R.T @ a_w, alpha=al_b,

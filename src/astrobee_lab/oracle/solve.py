@@ -220,9 +220,9 @@ def solve(leg: Leg, params: pm.PairParams, bump: Bump | None = None, budget: flo
     opti.subject_to(sb >= 0)
     opti.subject_to(st >= 0)
     # from a second after the bump's end (what the bump itself leaves is not a plan)
-    limited = [k for k in range(1, N + 1)
-               if bump is None or ts[k] >= bump.time + bump.duration + LIMIT_AFTER - 1e-9]
     if mode_limits:
+        limited = [k for k in range(1, N + 1)
+                   if bump is None or ts[k] >= bump.time + bump.duration + LIMIT_AFTER - 1e-9]
         sr = opti.variable(N + 1)      # rate / speed slack per node (squared units)
         opti.subject_to(sr >= 0)
         for k in limited:
