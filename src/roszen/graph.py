@@ -28,7 +28,20 @@ class GraphCache:
         lv = session.liveliness()
         self._sub = lv.declare_subscriber(key, zenoh.handlers.Callback(self._on_sample, indirect=False),
                                          history=True)
-        lv.get(key, zenoh.handlers.Callback(self._on_reply, self._ready.set, indirect=False), timeout=3.0)
+        # the replies through zenoh's own channel, drained by a thread: a Python callback would
+        # be dropped on zenoh's thread under the session's lock when the query ends, taking the
+        # GIL there, and a node undeclaring an entity meanwhile (holding the GIL, waiting for
+        # that lock) deadlocked (a hung fresh-clone run, tests/runtime/test_bad_input.py)
+        replies = lv.get(key, timeout=3.0)
+        threading.Thread(target=self._drain, args=(replies,), name="roszen-graph-get",
+                         daemon=True).start()
+
+    def _drain(self, replies) -> None:
+        try:
+            for reply in replies:
+                self._on_reply(reply)
+        finally:
+            self._ready.set()
 
     # -- updates ----------------------------------------------------------------------------
     @zenoh_callback
