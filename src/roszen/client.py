@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import itertools
+import threading
 from typing import TYPE_CHECKING, Any, Optional
 
 import zenoh
@@ -14,6 +15,15 @@ from .qos import QoSProfile
 
 if TYPE_CHECKING:
     from .node import Node
+
+
+def _collect(replies, on_reply, on_done) -> None:
+    """Hand each reply of one call to on_reply, then call on_done (the query's end)."""
+    try:
+        for reply in replies:
+            on_reply(reply)
+    finally:
+        on_done()
 
 
 class ServiceError(RuntimeError):
@@ -43,7 +53,7 @@ class Client(_Endpoint):
         return self.node.context.graph.wait_for(self.service_is_ready, timeout_sec)
 
     def call_async(self, request: Any) -> "concurrent.futures.Future":
-        """Send the request; the Future resolves (on a zenoh thread) to the response or a ServiceError."""
+        """Send the request; the Future resolves (on the call's reader thread) to the response or a ServiceError."""
         if not isinstance(request, self._sup.request.cls):
             raise TypeError(f"client {self.srv_name} expects a {self.srv_type} request, got {type(request).__name__}")
         data = self._sup.request.serialize(request)
@@ -88,9 +98,13 @@ class Client(_Endpoint):
                 except concurrent.futures.InvalidStateError:
                     pass
 
-        self._querier.get(zenoh.handlers.Callback(_guarded(on_reply), _guarded(on_done), indirect=False),
-                          payload=data,
-                          attachment=wire.make_attachment(seq, self.gid))
+        # the replies through zenoh's own channel, read by a thread per call: a Python callback
+        # would be dropped on zenoh's thread under the session's lock when the query ends,
+        # taking the GIL there, and a node undeclaring an entity meanwhile (holding the GIL,
+        # waiting for that lock) deadlocks (as roszen.graph's start-up query did)
+        replies = self._querier.get(payload=data, attachment=wire.make_attachment(seq, self.gid))
+        threading.Thread(target=_collect, args=(replies, _guarded(on_reply), _guarded(on_done)),
+                         name=f"roszen-client{self.srv_name}", daemon=True).start()
         if _pending_interrupts:
             raise_pending()
         return fut

@@ -85,3 +85,30 @@ def test_spin_until_future_complete_with_async_call(node):
     fut = cli.call_async(roszen.request_class(T)())
     roszen.spin_until_future_complete(node, fut, timeout_sec=10)
     assert fut.done() and fut.result().message == "done"
+
+
+def test_service_replies_are_read_off_zenohs_thread_while_entities_come_and_go(node):
+    """A call's replies come through zenoh's channel to a reader thread of the client's, not a
+    Python callback zenoh would drop on its own thread under the session's lock (the deadlock
+    roszen.graph's start-up query once hit against a node undeclaring a publisher); calls made
+    while publishers are declared and undeclared all complete."""
+    import threading
+    T = "std_srvs/srv/Trigger"
+    Resp = roszen.response_class(T)
+
+    def handle(req):
+        r = Resp()
+        r.success, r.message = True, "ok"
+        return r
+    node.create_service(T, "~/churn", handle)
+    cli = node.create_client(T, "/exec_test/churn")
+    assert cli.wait_for_service(5)
+    threads = []
+    for k in range(30):
+        fut = cli.call_async(roszen.request_class(T)())
+        fut.add_done_callback(lambda f: threads.append(threading.current_thread().name))
+        pub = node.create_publisher("std_msgs/msg/Int32", f"/churn{k}", QoSProfile(depth=1))
+        node.destroy_publisher(pub)
+        roszen.spin_until_future_complete(node, fut, timeout_sec=10)
+        assert fut.done() and fut.result().message == "ok"
+    assert len(threads) == 30 and all(t.startswith("roszen-client") for t in threads), threads[:3]
