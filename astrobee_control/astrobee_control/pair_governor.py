@@ -2,150 +2,26 @@
 
 The strap-held bag pivots on a ball joint at the gripper (~0.24 m from the robot's centre), so
 (i) every force of the position loop that is not along the arm pulls the bag across the lever
-and turns the robot (the strap force on the robot is ~ -(m_b / M) F at the grasp point), and
-(ii) a saturated attitude PD with 10 kg on the arm overshoots: its switching line (rate =
-Kp/Kd x error) asks for rates the torque limits cannot brake. This law keeps PD's position loop
-on the robot (the route through the hatch is the robot's) and changes three things:
+and turns the robot, and (ii) a saturated attitude PD with 10 kg on the arm overshoots: its
+switching line asks for rates the torque limits cannot brake. The law keeps PD's position loop
+on the robot (the route through the hatch is the robot's) and changes, each by an option of
+GovConfig (described at its field; all off by default but the rate limit):
 - attitude: the wanted rate towards the reference is at most sqrt(2 a |e|) per axis, a the
-  angular deceleration brake_share x the torque limits give on the pair's inertia (`inertia`:
-  robot alone, `pivot` robot + bag on the grasp, `rigid` (default) bag fixed to the robot,
-  `centre` about the pair's centre) x `inertia_scale`; `momentum` damps the pair's rate
-  (angular momentum / inertia) instead of the robot's while a segment is followed, so the
-  bag's swing is taken out with the robot's turn; stopping and holding at the goal the law
-  damps `hold_momentum`'s mix (default the robot's own rate: damping the pair's there lets the
-  swinging bag drag the robot round above the verdict's 0.02 rad/s of rest). gov_mom = gov_bag
-  (below) + momentum 1, pre-registered fresh seeds on the strap (studies/momentum_bag.yaml):
-  7.5 N 32/40 vs PD 14/40 (McNemar 0 / 18, p = 7.6e-6, no contact), 5 N 38/40 vs 28/40
-  (p = 0.002), 10 N 17/40 vs 9/40 (3 / 11, p = 0.057; 9 contact flights vs 4); replicated on
-  seeds 60-99: 7.5 N 27/40 vs 11/40 (p = 0.0009; 1 contact flight vs 0), 5 N 39/40 vs 26/40,
-  10 N 12/40 vs 4/40 (p = 0.021; 12 contact flights vs 4);
-- allocation (`lever: true`): the force's torque through the grasp, lever (m_b / M) g, counts in
-  allocation.allocate, torque weighted up with the attitude error, the force weight up with the
-  route error (`route_error`); off by default (false = force treated as acting at the centre);
-- `lever_use: guard` (with `lever`): the force is never bent to make torque; its part across
-  the lever is cut only as far as its torque about the centre would take from a saturated
-  attitude torque (allocation.guard: the route stops fighting the turn, it does not help it);
-- `clearance` (m, with `lever`): the lever may turn the pair only as far as the walls allow:
-  the force weight grows as (clearance / d)^2 where d, the least clearance of the bag's corners
-  and the robot's faces once each is carried on by its velocity for the stop the force limits
-  allow (stop_share of the smallest), falls below it (astrobee_control.clearance);
-- `fit` (m, the corridor fit): the robot's reference is shifted across the route, at most `fit`
-  and at `fit_speed`, by the shift that keeps the pair as it is now (the bag's corners where the
-  strap holds them, turned on at the pair's rate about its centre) farthest from the walls over
-  the plan's next `fit_horizon` s (astrobee_control.corridor_fit). Traced at 10 N (seeds 1, 3)
-  gov_mom's contacts came with the robot within 4 cm of its route: the strap held the bag
-  folded 0.4 m below it and the robot carried it into the JEM hatch's floor. gov_fit = gov_mom +
-  fit 0.3 (studies/corridor_fit.yaml, pre-registered): 10 N on seeds 100-139 17/40 vs PD 4/40
-  (McNemar 1 / 14, p = 0.00098), 7 contact flights vs 5;
-- `hold_error` (m): the position error the loop sees while stopping and holding is capped, so a
-  pair that arrives past its goal comes back at ~ Kp/Kd x this with a small force; uncapped, the
-  saturated force's torque about the pair's centre (~0.1 N m) spins the pair up again at the goal
-  against the 0.033 N m of pitch torque. gov_hold = gov_fit + hold_error 0.2: 10 N on seeds
-  140-179 16/40 vs PD 6/40 (p = 0.021; 7 contact flights vs 5), 7.5 N on 100-139 24/40 vs
-  6/40 (p = 4e-5; 8 vs 1);
-- `drift_speed` / `hold_drift_speed` (m/s): the force weight grows as (the pair's centre's
-  speed off its reference / this)^2, along the route / at the goal, so a bump's momentum is
-  braked before the lever turns the pair (the lever's torque about the centre is r x F: turning
-  the pair with it moves the centre);
-- `hold_torque_scale`: w_torque x this while stopping and holding at the goal (default 1;
-  gov_hold + 0.5: 7.5 N 21/40 with 2 contact flights on seeds 180-219, 23/40 with 3 on 220-259,
-  the same contact seeds as gov_hold's; not kept);
-- `clearance_motion: drift` (with `clearance`): the clearance's stop carries the pair as it is
-  at its centre's velocity off the reference, not each point at its own: traced (7.5 N, seed
-  230 of the fresh set 220-259), a bump sets the bag swinging at ~0.3 m/s on its strap and the
-  `points` prediction sends its corners metres through the walls, so the weight sits at its cap
-  and the lever is off for the 7 s after the bump while the pitch torque alone (0.033 N m)
-  lets the pair turn from 0.2 to 1 rad (gov_hold + drift: 10 N 5/22 with 6 contact flights on
-  seeds 180-201, gov_hold 10/22 with 6; not kept);
-- `unwind` (the long way round): a pair turning away from its reference goes on round it
-  (the error 2 pi - |e| the other way) when that ends sooner than stopping and coming back
-  (turn_time, at the brake_share deceleration and the mode's hard rate limit). Solved by the
-  oracle at 7.5 N (seeds 230, 245 of the fresh set 220-259, studies/results/oracle/), the
-  optimal recoveries never brake the bumped turn: the pair goes on round at 0.16-0.35 rad/s
-  with <= 0.01 N m of torque and arrives upright at the budget's end, where gov_hold brakes with
-  its pitch torque saturated, the turn still grows to ~1.5 rad and the lever's force that
-  helps it drives the pair 1-1.8 m off its route into the JEM's walls. gov_uw = gov_hold +
-  unwind (studies/unwind.yaml, pre-registered, fresh seeds): 10 N 24/40 vs PD 7/40 and 25/40 vs
-  8/40 (McNemar p = 1.5e-5 both) with 1 and 0 contact flights vs 4 and 4; 7.5 N 24/40 vs 7/40
-  (p = 1.5e-5) and 29/40 vs 9/40 (p = 1.9e-6) with none vs 0 and 2; 5 N 35/40 vs 20/40, below
-  90% of the oracle-feasible seeds (gov_hold 37/40, gov_mom 36/40 on the same seeds);
-- `unwind_rate: pair` decides the long way round on the pair's rate also while holding at the
-  goal (where the loop damps the robot's own rate, which swings against the bag), and
-  `unwind_coast` (rad/s) lets a turn towards the reference that is faster than the mode's limit
-  keep its rate up to this, braked only to stop there (the oracle's recoveries coast at
-  0.2-0.35 rad/s). Neither kept (thirteenth session, studies/late_bumps.yaml): unwind_rate pair
-  flew exactly gov_uw's outcomes (7.5 N seeds 180-219 25/40, 5 N seeds 0-19 16/20); with
-  unwind_coast 0.35 25/40 (6 gained, 6 lost) and 17/20 (1 gained);
-- gov_full = gov_uw + brake_share 1.0 (studies/late_bumps.yaml, pre-registered, fresh seeds
-  340-379): 7.5 N 23/40 vs PD 9/40 (p = 0.0013), 10 N 23/40 vs 4/40 (p = 3.8e-6; 1 contact
-  flight vs 4), 5 N 35/40: against gov_uw on the same flights 1 / 0, 4 / 6, 4 / 2 split seeds,
-  no difference. Both miss late bumps: slow, not unsafe (given a 90 s settle budget gov_uw
-  rests on 48 of 50 late-bumped dev flights, 25-42 s median past the plan's end);
-- holding after a late bump (fourteenth session, studies/hold_return.yaml, dev seeds): traced
-  at 5 N (seeds 348, 358 of late_bumps) the lever carries the pair 1.1-1.7 m past the goal in
-  the plan's last 15 s, and holding there the return force's torque stalls the pitch at 0.2 rad
-  for ~20 s. `hold_lever_use: guard` (the guard allocation while stopping and holding) turns the
-  pair upright 15 s sooner (traced on gov_full, seed 348) but lets it drift into the walls
-  (5 N: 13/26 with 10 contact flights against gov_uw's 17/26 with none; `guard_clear`, only
-  with the walls clear: 17/26 and 6/24 at 5 and 7.5 N, no contacts); `hold_error_upright`
-  (the cap grows to this once the pair is upright) 17/26 and 5/24 at 5 and 7.5 N, gov_uw's own
-  outcomes, ~0.1 s sooner at rest; `lever_along: brake` (the lever may not push the pair
-  ahead of its route, allocation.keep_along) 10/26 (2 / 9 against gov_uw): without the
-  forward push the pair turns over. None kept;
-- `lever_from: bag` (with `lever`, `track: robot`): the lever's point is the observed bag, the
-  pair rigid as it is now, not the grasp: after a bump the FEM strap holds the bag folded and the
-  pair's centre sits 0.14 m below the robot's x axis, where the grasp lever counts less than half
-  the turn a route force gives (studies/lever_bag.yaml, with clearance 0.3, strap, 5 N: 14/20 on
-  seeds 0-19 where it was found, 35/40 on fresh seeds 20-59 against PD's 28/40, McNemar 0 / 7,
-  p = 0.016, no contact; 7.5 / 10 N 4/20 and 1/20 with 3 and 8 contact flights, PD 3/20 and
-  1/20 with 1 and 4);
-- the position loop's point (`track`): the robot's centre (default) or the pair's centre of
-  mass (`centre`: the reference carries the bag at its observed body-frame offset, so turning the
-  pair about its centre asks no force; with `lever` the allocation then counts the force's torque
-  about that observed centre, not through the grasp);
-- the route across the strap (`inline: true`, an ablation): the robot's reference across the
-  strap moves onto the bag's line, where the grasp holds the bag's centre of percussion straight
-  behind it (a force at the grasp across the strap swings the bag about that point but does not
-  move it; only the strap's tension does), steered back to the route through a fold of at most
-  steer_max while the plan accelerates along the strap. Measured (studies/inline_reference.yaml,
-  5 N, seeds 0-19, with lever + clearance 0.3): 4/20 with 15 contact flights (no steering 0/20,
-  20), against gov_clear's 11/20 with none (McNemar 8 / 1, p = 0.039): after a bump that point
-  drifts at up to J / m_b = 0.1 m/s and the robot following it is carried ~1 m off the route.
-  Capped at `inline_max` off the route (no steering): 0.1 m 11/20 on gov_clear's very seeds
-  (no change), 0.2 m 3/20 with 5 contact flights;
-- re-timing (`retime: true`): the reference runs on a progress clock s' = sigma in [0, 1] that
-  drops with the attitude error, the rate and the bag's relative speed, at most `max_delay`
-  behind the plan's clock; off by default.
-Measured (FEM bag fast 250 nodes, strap, realism off but a 5 N 0.2 s bump on the bag at U(10,
-30) s, Node 2 -> JEM, honest verdict, 2026-11-26): PD fails seeds 0 2 4 7 8 11 of 0-11 (all:
-attitude not settled within plan + 30 s; no contacts). Defaults on those 6 (dev set): 1/6
-(seed 0); brake_share 0.9: 0/5; lever true: 1/6 with bag wall contacts on 4 (attitude
-excursion 0.33-0.53 rad instead of ~3.14) or, w_torque 1, 1-1.7 m off the route; momentum 1
-with the `centre` inertia: 0/2. Held out, seeds 12-19: PD 4/8, defaults 3/8 (the misses
-closer: final attitude 0.41-0.56 rad against PD's 1.07-2.40, or |w| 0.03-0.13 rad/s at the
-budget's end); no contacts either. All of 0-19: PD 10/20, defaults 8/20 (only PD: 6 10 17,
-only pair_gov: 0; McNemar exact p = 0.625). On the reduced pair model (pair_model 'fem', 10 N, 6 m
-straight leg, seeds 0-11): PD 0/12, defaults 10/12 (brake_share 0.45: 11/12). Not better than
-PD on the FEM bag at 5 N: the pair model's success does not carry over.
-Traced (400 nodes, 5 N, seed 5): after the bump the pair turns and the robot-centred position
-loop holds the robot on its route with F_z ~ -0.2 N, ~0.04 N m about the pair's centre against
-the 0.033 N m pitch limit, so the pitch error grows to 1.5 rad before it comes back. With
-`track: centre, lever: true` (seeds 0-19, same setting): 8/20 (1 with contact), largest
-attitude excursion 0.13-0.49 rad (defaults: 7/20, up to pi); the misses now drift 0.3-2.2 m off
-the route while the force turns the pair. The grasp's lever with the centre tracked: 11/20 but
-7 with contact; w_torque 1: 5/14. In the pair-control study (`gov_centre`, 20 paired seeds):
-2.5 / 5 / 7.5 / 10 N 14 / 8 / 2 / 0 of 20 with 0 / 1 / 7 / 18 flights with contact (the force
-turning the pair drives it into the walls at the larger bumps); the clamp at 5 N 13/20 vs PD's
-7/20 (McNemar p 0.031). Through the CBF filter at 10 N (seeds 0-9): contacts 4/10, success 1/10.
-The guard (`lever: true, lever_use: guard`, seeds 0-19 at 5 N, the study's setting, fifth
-session, studies/lever_variants.yaml): centre-tracked 10/20 with 9 contact flights, robot-tracked
-8/20 with 11 (PD 10/20, 0 contacts); attitude excursion 0.14-1.23 rad, but with the cross-lever force cut while the
-attitude saturates the bump's momentum is not taken out and the pair drifts 0.66-1.16 m off
-the route into the walls: on this bag the route has to win over the attitude, not yield to it.
-What is left after the bump is a bag resting at a new angle on its strap (the trace: its centre
-moved from (-0.48, 0, -0.07) to (-0.36, -0.03, -0.28) m in the body frame and stayed), so the
-force perpendicular to the new lever turns the pair and the robot's 0.033 N m lets it push the
-pair sideways with ~0.14 N at most without turning it.
+  deceleration brake_share x the torque limits give on the pair's inertia; `momentum` damps
+  the pair's rate instead of the robot's; `unwind` goes on round the long way when that ends
+  sooner than braking and coming back (unwound_error);
+- allocation (`lever`): the force's torque about the pair's centre counts, so the force may
+  be bent to turn the pair (allocation.allocate) or only stop opposing the turn (`lever_use:
+  guard`), as far as the walls (`clearance`, astrobee_control.clearance) and the route
+  (`route_error`, `drift_speed`, `lever_along`) allow;
+- the reference: the corridor fit (`fit`, astrobee_control.corridor_fit), the bag's line
+  (`inline`, an ablation), the progress clock (`retime`);
+- holding at the goal: the return capped (`hold_error`, `hold_error_upright`), with its own
+  allocation and damping (`hold_lever_use`, `hold_torque_scale`, `hold_momentum`).
+The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw (the demo's), gov_full) are
+option sets written in studies/*.yaml. What each option measured, kept or not, is in
+docs/results/pair_control_study.md (its appendix holds this module's development log) and
+docs/results/pair_control_followup.md.
 """
 from __future__ import annotations
 
@@ -272,6 +148,12 @@ class GovConfig:
     unwind_coast: float = 0.0    # rad/s: a pair turning towards its reference (either way
                                  # round) faster than the mode's hard rate limit keeps that rate,
                                  # up to this, braked only to stop there (0: braked to the limit)
+    unwind_brake_scale: float = 1.0  # the long way round is weighed against braking at the
+                                 # brake_share deceleration x this (the lever's force helps
+                                 # the torque brake a small turn) ...
+    unwind_brake_within: float = 0.0  # rad: ... where braking so stops the turn within this
+                                 # of the reference (past ~0.4 rad braking with the bag
+                                 # trailing is an inverted pendulum; 0: everywhere)
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
@@ -318,7 +200,7 @@ class GovConfig:
                     or v < 0:
                 raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
         for name in ("inertia_scale", "settle_time", "sigma_rate", "fit_horizon", "fit_speed",
-                     "hold_torque_scale"):
+                     "hold_torque_scale", "unwind_brake_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("momentum", "hold_momentum"):
@@ -373,7 +255,8 @@ def turn_time(angle: float, v: float, alpha: float, w_max: float = math.inf) -> 
 
 
 def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: float,
-                  unwinding: bool, w_keep: float = 0.0) -> tuple[np.ndarray, bool]:
+                  unwinding: bool, w_keep: float = 0.0, brake_scale: float = 1.0,
+                  brake_within: float = 0.0) -> tuple[np.ndarray, bool]:
     """The attitude error to steer by and whether it is the long way round: a pair turning away
     from its reference at w (body rad/s) about the error's axis goes on round (the error
     e - 2 pi e / |e|) when that turn, at most w_max, ends sooner than stopping and coming back,
@@ -381,7 +264,9 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
     mode's hard rate limit, which the long way round coasts at (or at the turn's own rate, up
     to w_keep, where that is faster: GovConfig.unwind_coast). The oracle's 7.5 N
     recoveries do this (docs/results/pair_control_followup.md): the torque limits stop the
-    bumped pair's turn only ~1.2 rad later, and the way back then costs more than the way on."""
+    bumped pair's turn only ~1.2 rad later, and the way back then costs more than the way on.
+    brake_scale: the short way's deceleration x this (the lever's force helping the torque),
+    where braking so would stop the turn within brake_within rad of the reference (0: always)."""
     th = float(np.linalg.norm(e))
     if th < 1e-6:
         return e, False
@@ -391,7 +276,10 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
         return e, False
     a = 1.0 / float((u * u) @ (1.0 / np.asarray(alpha_max, float)))
     w_round = max(w_max, min(-v, w_keep))
-    if unwinding or turn_time(2 * math.pi - th, -v, a, w_round) < turn_time(th, v, a):
+    a_brake = a * brake_scale
+    if brake_within > 0 and th + v * v / (2 * a_brake) > brake_within:
+        a_brake = a
+    if unwinding or turn_time(2 * math.pi - th, -v, a, w_round) < turn_time(th, v, a_brake):
         return e - 2 * math.pi * u, True
     return e, False
 
@@ -633,8 +521,9 @@ class GovController:
                 w_turn = self.pair_rate(state)
             w_turn = w_turn - R.T @ np.asarray(ref.omega, float)
             if cfg.unwind:
-                e_go, self.unwinding = unwound_error(e_att, w_turn, alpha_max, w_max,
-                                                     self.unwinding, cfg.unwind_coast)
+                e_go, self.unwinding = unwound_error(
+                    e_att, w_turn, alpha_max, w_max, self.unwinding, cfg.unwind_coast,
+                    cfg.unwind_brake_scale, cfg.unwind_brake_within)
             th = float(np.linalg.norm(e_go))
             if cfg.unwind_coast > 0 and th > 1e-6:     # keep a fast turn that goes the way on
                 w_max = max(w_max, min(float(w_turn @ e_go) / th, cfg.unwind_coast))

@@ -176,6 +176,8 @@ def test_registered():
     ({"unwind": "yes"}, "unwind must be true or false"),
     ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
+    ({"unwind_brake_scale": 0.0}, "unwind_brake_scale must be > 0"),
+    ({"unwind_brake_within": -0.5}, "unwind_brake_within must be a finite number >= 0"),
     ({"lever_along": "push"}, "lever_along must be one of free, brake, route"),
     ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard, guard_clear"),
     ({"hold_error_upright": -0.4}, "hold_error_upright must be a finite number >= 0"),
@@ -547,6 +549,21 @@ def test_unwind_lets_the_bumped_pair_turn_on_instead_of_braking():
         torques[unwind] = law.pd.step(st, ref, 0.016).torque[1]
     assert torques[False] == pytest.approx(FM.max_torque[1])
     assert torques[True] < 0.0      # on round it speeds up to the mode's 0.17 rad/s limit
+
+
+def test_unwind_brake_weighs_the_long_way_against_lever_assisted_braking_near_upright():
+    """A pair 0.3 rad off turning away at 0.15 rad/s: on the torque limits alone (0.0071 rad/s^2)
+    braking stops it 1.9 rad off and the long way round is sooner; braking three times as hard
+    stops it 0.83 rad off, so it brakes, unless that is beyond unwind_brake_within."""
+    a = np.full(3, 0.0071)
+    e, w = np.array([0.0, 0.3, 0.0]), np.array([0.0, -0.15, 0.0])
+    assert unwound_error(e, w, a, 0.1745, False)[1]
+    assert not unwound_error(e, w, a, 0.1745, False, brake_scale=3.0)[1]
+    assert not unwound_error(e, w, a, 0.1745, False, brake_scale=3.0, brake_within=1.0)[1]
+    assert unwound_error(e, w, a, 0.1745, False, brake_scale=3.0, brake_within=0.6)[1]
+    # a slow turn is braked whatever the scale; one already going round goes on round
+    assert not unwound_error(e, 0.3 * w, a, 0.1745, False)[1]
+    assert unwound_error(e, w, a, 0.1745, True, brake_scale=3.0)[1]
 
 
 def test_unwind_coast_keeps_a_fast_turn_towards_the_reference():
