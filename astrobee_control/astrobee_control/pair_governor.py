@@ -153,7 +153,9 @@ class GovConfig:
                                  # the torque brake a small turn) ...
     unwind_brake_within: float = 0.0  # rad: ... where braking so stops the turn within this
                                  # of the reference (past ~0.4 rad braking with the bag
-                                 # trailing is an inverted pendulum; 0: everywhere)
+                                 # trailing is an inverted pendulum; 0: everywhere). Not
+                                 # kept: x 3 within 0.6 / 1.0 rad flew gov_uw's 5 N outcomes
+                                 # and lost 1-3 net at 7.5 N (studies/unwind_brake.yaml)
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
