@@ -148,6 +148,10 @@ class GovConfig:
     unwind_coast: float = 0.0    # rad/s: a pair turning towards its reference (either way
                                  # round) faster than the mode's hard rate limit keeps that rate,
                                  # up to this, braked only to stop there (0: braked to the limit)
+    unwind_within: float = 0.0   # rad: the long way round is taken up only while the attitude
+                                 # error is below this: a bumped spin from near upright, not a
+                                 # turn that grows later, when going round leaves too little
+                                 # time (0: at any error)
     unwind_brake_scale: float = 1.0  # the long way round is weighed against braking at the
                                  # brake_share deceleration x this (the lever's force helps
                                  # the torque brake a small turn) ...
@@ -258,7 +262,8 @@ def turn_time(angle: float, v: float, alpha: float, w_max: float = math.inf) -> 
 
 def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: float,
                   unwinding: bool, w_keep: float = 0.0, brake_scale: float = 1.0,
-                  brake_within: float = 0.0) -> tuple[np.ndarray, bool]:
+                  brake_within: float = 0.0, start_within: float = 0.0
+                  ) -> tuple[np.ndarray, bool]:
     """The attitude error to steer by and whether it is the long way round: a pair turning away
     from its reference at w (body rad/s) about the error's axis goes on round (the error
     e - 2 pi e / |e|) when that turn, at most w_max, ends sooner than stopping and coming back,
@@ -268,13 +273,15 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
     recoveries do this (docs/results/pair_control_followup.md): the torque limits stop the
     bumped pair's turn only ~1.2 rad later, and the way back then costs more than the way on.
     brake_scale: the short way's deceleration x this (the lever's force helping the torque),
-    where braking so would stop the turn within brake_within rad of the reference (0: always)."""
+    where braking so would stop the turn within brake_within rad of the reference (0: always).
+    start_within: the long way round is taken up only while the error is below this (rad; 0:
+    at any error): a turn that grows later is braked."""
     th = float(np.linalg.norm(e))
     if th < 1e-6:
         return e, False
     u = e / th
     v = float(w @ u)                           # rate towards the reference the short way
-    if v >= 0:
+    if v >= 0 or (not unwinding and 0 < start_within < th):
         return e, False
     a = 1.0 / float((u * u) @ (1.0 / np.asarray(alpha_max, float)))
     w_round = max(w_max, min(-v, w_keep))
@@ -525,7 +532,7 @@ class GovController:
             if cfg.unwind:
                 e_go, self.unwinding = unwound_error(
                     e_att, w_turn, alpha_max, w_max, self.unwinding, cfg.unwind_coast,
-                    cfg.unwind_brake_scale, cfg.unwind_brake_within)
+                    cfg.unwind_brake_scale, cfg.unwind_brake_within, cfg.unwind_within)
             th = float(np.linalg.norm(e_go))
             if cfg.unwind_coast > 0 and th > 1e-6:     # keep a fast turn that goes the way on
                 w_max = max(w_max, min(float(w_turn @ e_go) / th, cfg.unwind_coast))

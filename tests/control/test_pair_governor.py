@@ -177,6 +177,7 @@ def test_registered():
     ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
     ({"unwind_brake_scale": 0.0}, "unwind_brake_scale must be > 0"),
+    ({"unwind_within": -0.2}, "unwind_within must be a finite number >= 0"),
     ({"unwind_brake_within": -0.5}, "unwind_brake_within must be a finite number >= 0"),
     ({"lever_along": "push"}, "lever_along must be one of free, brake, route"),
     ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard, guard_clear"),
@@ -564,6 +565,19 @@ def test_unwind_brake_weighs_the_long_way_against_lever_assisted_braking_near_up
     # a slow turn is braked whatever the scale; one already going round goes on round
     assert not unwound_error(e, 0.3 * w, a, 0.1745, False)[1]
     assert unwound_error(e, w, a, 0.1745, True, brake_scale=3.0)[1]
+
+
+def test_unwind_within_takes_up_the_long_way_only_from_near_upright():
+    """unwind_within: a bumped spin from near upright goes round; the same turn grown to 0.35
+    rad before it is decided on is braked, unless the pair already goes round."""
+    a = np.full(3, 0.0071)
+    w = np.array([0.0, -0.15, 0.0])
+    near, grown = np.array([0.0, 0.01, 0.0]), np.array([0.0, 0.35, 0.0])
+    assert unwound_error(near, w, a, 0.1745, False, start_within=0.2)[1]
+    assert unwound_error(grown, w, a, 0.1745, False)[1]
+    assert not unwound_error(grown, w, a, 0.1745, False, start_within=0.2)[1]
+    assert unwound_error(grown, w, a, 0.1745, False, start_within=0.5)[1]
+    assert unwound_error(grown, w, a, 0.1745, True, start_within=0.2)[1]
 
 
 def test_unwind_coast_keeps_a_fast_turn_towards_the_reference():
