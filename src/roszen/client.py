@@ -102,7 +102,10 @@ class Client(_Endpoint):
         # would be dropped on zenoh's thread under the session's lock when the query ends,
         # taking the GIL there, and a node undeclaring an entity meanwhile (holding the GIL,
         # waiting for that lock) deadlocks (as roszen.graph's start-up query did)
-        replies = self._querier.get(payload=data, attachment=wire.make_attachment(seq, self.gid))
+        token = zenoh.CancellationToken()    # call() ends the query (and its thread) on timeout
+        fut.cancel_query = token.cancel      # type: ignore[attr-defined]
+        replies = self._querier.get(payload=data, attachment=wire.make_attachment(seq, self.gid),
+                                    cancellation_token=token)
         threading.Thread(target=_collect, args=(replies, _guarded(on_reply), _guarded(on_done)),
                          name=f"roszen-client{self.srv_name}", daemon=True).start()
         if _pending_interrupts:
@@ -115,5 +118,5 @@ class Client(_Endpoint):
         try:
             return fut.result(timeout=timeout_sec)
         except concurrent.futures.TimeoutError:
-            fut.cancel()
+            fut.cancel_query()
             raise TimeoutError(f"service {self.srv_name} did not answer within {timeout_sec} s") from None

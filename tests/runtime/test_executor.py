@@ -112,3 +112,23 @@ def test_service_replies_are_read_off_zenohs_thread_while_entities_come_and_go(n
         roszen.spin_until_future_complete(node, fut, timeout_sec=10)
         assert fut.done() and fut.result().message == "ok"
     assert len(threads) == 30 and all(t.startswith("roszen-client") for t in threads), threads[:3]
+
+
+def test_a_timed_out_call_ends_its_query_and_reader_thread(node):
+    """call() timing out cancels the zenoh query, so the call's reader thread ends at once
+    instead of waiting out the querier's timeout (a caller retrying a stuck service would pile
+    them up): the server here is never spun, so it never answers."""
+    import threading
+    T = "std_srvs/srv/Trigger"
+    node.create_service(T, "~/stuck", lambda req: roszen.response_class(T)())
+    cli = node.create_client(T, "/exec_test/stuck")
+    assert cli.wait_for_service(5)
+    with pytest.raises(TimeoutError):
+        cli.call(roszen.request_class(T)(), timeout_sec=0.2)
+
+    def readers():
+        return [t for t in threading.enumerate() if t.name == "roszen-client/exec_test/stuck"]
+    end = time.monotonic() + 5.0
+    while readers() and time.monotonic() < end:
+        time.sleep(0.05)
+    assert not readers()
