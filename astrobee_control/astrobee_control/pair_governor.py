@@ -18,8 +18,8 @@ GovConfig (described at its field; all off by default but the rate limit):
   (`inline`, an ablation), the progress clock (`retime`);
 - holding at the goal: the return capped (`hold_error`, `hold_error_upright`), with its own
   allocation and damping (`hold_lever_use`, `hold_torque_scale`, `hold_momentum`).
-The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw (the demo's), gov_full) are
-option sets written in studies/*.yaml. What each option measured, kept or not, is in
+The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw (the demo's), gov_full,
+gov_uwu) are option sets written in studies/*.yaml. What each option measured, kept or not, is in
 docs/results/pair_control_study.md (its appendix holds this module's development log) and
 docs/results/pair_control_followup.md.
 """
@@ -151,7 +151,9 @@ class GovConfig:
     unwind_within: float = 0.0   # rad: the long way round is taken up only while the attitude
                                  # error is below this: a bumped spin from near upright, not a
                                  # turn that grows later, when going round leaves too little
-                                 # time (0: at any error)
+                                 # time (0: at any error). gov_uwu = gov_uw + 0.2, fresh
+                                 # seeds 380-419: 5 N 35/40, 7.5 N 26/40 vs PD 11/40, 10 N
+                                 # 27/40 vs 9/40 (studies/unwind_within.yaml)
     unwind_brake_scale: float = 1.0  # the long way round is weighed against braking at the
                                  # brake_share deceleration x this (the lever's force helps
                                  # the torque brake a small turn) ...
