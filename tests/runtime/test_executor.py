@@ -1,6 +1,7 @@
 """The executor: no loss under load for KEEP_ALL / deep KEEP_LAST, bounded KEEP_LAST history, timers."""
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
@@ -55,7 +56,6 @@ def test_keep_last_depth_bounds_the_queue(node):
 
 
 def test_timer_and_callbacks_share_one_thread(node):
-    import threading
     threads, ticks = set(), []
     t = node.create_timer(0.01, lambda: (ticks.append(1), threads.add(threading.get_ident())))
     node.create_subscription("std_msgs/msg/Int32", "/tt", lambda m: threads.add(threading.get_ident()), 10)
@@ -71,18 +71,24 @@ def test_timer_and_callbacks_share_one_thread(node):
     assert len(ticks) == n
 
 
-def test_spin_until_future_complete_with_async_call(node):
-    T = "std_srvs/srv/Trigger"
-    Resp = roszen.response_class(T)
+TRIGGER = "std_srvs/srv/Trigger"
 
+
+def _trigger(node, name: str, message: str):
+    """A Trigger service ~/<name> on `node` answering `message`, and a client of it, ready."""
     def handle(req):
-        r = Resp()
-        r.success, r.message = True, "done"
+        r = roszen.response_class(TRIGGER)()
+        r.success, r.message = True, message
         return r
-    node.create_service(T, "~/trigger", handle)
-    cli = node.create_client(T, "/exec_test/trigger")
+    node.create_service(TRIGGER, f"~/{name}", handle)
+    cli = node.create_client(TRIGGER, f"/exec_test/{name}")
     assert cli.wait_for_service(5)
-    fut = cli.call_async(roszen.request_class(T)())
+    return cli
+
+
+def test_spin_until_future_complete_with_async_call(node):
+    cli = _trigger(node, "trigger", "done")
+    fut = cli.call_async(roszen.request_class(TRIGGER)())
     roszen.spin_until_future_complete(node, fut, timeout_sec=10)
     assert fut.done() and fut.result().message == "done"
 
@@ -92,20 +98,10 @@ def test_service_replies_are_read_off_zenohs_thread_while_entities_come_and_go(n
     Python callback zenoh would drop on its own thread under the session's lock (the deadlock
     roszen.graph's start-up query once hit against a node undeclaring a publisher); calls made
     while publishers are declared and undeclared all complete."""
-    import threading
-    T = "std_srvs/srv/Trigger"
-    Resp = roszen.response_class(T)
-
-    def handle(req):
-        r = Resp()
-        r.success, r.message = True, "ok"
-        return r
-    node.create_service(T, "~/churn", handle)
-    cli = node.create_client(T, "/exec_test/churn")
-    assert cli.wait_for_service(5)
+    cli = _trigger(node, "churn", "ok")
     threads = []
     for k in range(30):
-        fut = cli.call_async(roszen.request_class(T)())
+        fut = cli.call_async(roszen.request_class(TRIGGER)())
         fut.add_done_callback(lambda f: threads.append(threading.current_thread().name))
         pub = node.create_publisher("std_msgs/msg/Int32", f"/churn{k}", QoSProfile(depth=1))
         node.destroy_publisher(pub)
@@ -118,13 +114,9 @@ def test_a_timed_out_call_ends_its_query_and_reader_thread(node):
     """call() timing out cancels the zenoh query, so the call's reader thread ends at once
     instead of waiting out the querier's timeout (a caller retrying a stuck service would pile
     them up): the server here is never spun, so it never answers."""
-    import threading
-    T = "std_srvs/srv/Trigger"
-    node.create_service(T, "~/stuck", lambda req: roszen.response_class(T)())
-    cli = node.create_client(T, "/exec_test/stuck")
-    assert cli.wait_for_service(5)
+    cli = _trigger(node, "stuck", "never")
     with pytest.raises(TimeoutError):
-        cli.call(roszen.request_class(T)(), timeout_sec=0.2)
+        cli.call(roszen.request_class(TRIGGER)(), timeout_sec=0.2)
 
     def readers():
         return [t for t in threading.enumerate() if t.name == "roszen-client/exec_test/stuck"]
