@@ -154,6 +154,11 @@ class GovConfig:
                                  # time (0: at any error). gov_uwu = gov_uw + 0.2, fresh
                                  # seeds 380-419: 5 N 35/40, 7.5 N 26/40 vs PD 11/40, 10 N
                                  # 27/40 vs 9/40 (studies/unwind_within.yaml)
+    unwind_margin: float = 1.0   # the long way round is taken up only when it ends in at most
+                                 # this share of braking's time: at the bump the rate grows
+                                 # through the tie, and a small bump's full rate leaves going
+                                 # round only a little sooner (0.8-0.9 at 5 N against 0.6-0.7 at
+                                 # 7.5 N, traced), where braking with the lever is sooner still
     unwind_brake_scale: float = 1.0  # the long way round is weighed against braking at the
                                  # brake_share deceleration x this (the lever's force helps
                                  # the torque brake a small turn) ...
@@ -208,7 +213,7 @@ class GovConfig:
                     or v < 0:
                 raise ValueError(f"{f.name} must be a finite number >= 0, got {v!r}")
         for name in ("inertia_scale", "settle_time", "sigma_rate", "fit_horizon", "fit_speed",
-                     "hold_torque_scale", "unwind_brake_scale"):
+                     "hold_torque_scale", "unwind_brake_scale", "unwind_margin"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("momentum", "hold_momentum"):
@@ -264,7 +269,7 @@ def turn_time(angle: float, v: float, alpha: float, w_max: float = math.inf) -> 
 
 def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: float,
                   unwinding: bool, w_keep: float = 0.0, brake_scale: float = 1.0,
-                  brake_within: float = 0.0, start_within: float = 0.0
+                  brake_within: float = 0.0, start_within: float = 0.0, margin: float = 1.0
                   ) -> tuple[np.ndarray, bool]:
     """The attitude error to steer by and whether it is the long way round: a pair turning away
     from its reference at w (body rad/s) about the error's axis goes on round (the error
@@ -277,7 +282,8 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
     brake_scale: the short way's deceleration x this (the lever's force helping the torque),
     where braking so would stop the turn within brake_within rad of the reference (0: always).
     start_within: the long way round is taken up only while the error is below this (rad; 0:
-    at any error): a turn that grows later is braked."""
+    at any error): a turn that grows later is braked. margin: ... and only when it ends in at
+    most this share of braking's time (1: whichever is sooner; below 1 a near tie is braked)."""
     th = float(np.linalg.norm(e))
     if th < 1e-6:
         return e, False
@@ -290,7 +296,8 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
     a_brake = a * brake_scale
     if brake_within > 0 and th + v * v / (2 * a_brake) > brake_within:
         a_brake = a
-    if unwinding or turn_time(2 * math.pi - th, -v, a, w_round) < turn_time(th, v, a_brake):
+    t_round = turn_time(2 * math.pi - th, -v, a, w_round)
+    if unwinding or t_round < margin * turn_time(th, v, a_brake):
         return e - 2 * math.pi * u, True
     return e, False
 
@@ -534,7 +541,8 @@ class GovController:
             if cfg.unwind:
                 e_go, self.unwinding = unwound_error(
                     e_att, w_turn, alpha_max, w_max, self.unwinding, cfg.unwind_coast,
-                    cfg.unwind_brake_scale, cfg.unwind_brake_within, cfg.unwind_within)
+                    cfg.unwind_brake_scale, cfg.unwind_brake_within, cfg.unwind_within,
+                    cfg.unwind_margin)
             th = float(np.linalg.norm(e_go))
             if cfg.unwind_coast > 0 and th > 1e-6:     # keep a fast turn that goes the way on
                 w_max = max(w_max, min(float(w_turn @ e_go) / th, cfg.unwind_coast))

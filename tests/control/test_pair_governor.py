@@ -178,6 +178,7 @@ def test_registered():
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
     ({"unwind_brake_scale": 0.0}, "unwind_brake_scale must be > 0"),
     ({"unwind_within": -0.2}, "unwind_within must be a finite number >= 0"),
+    ({"unwind_margin": 0.0}, "unwind_margin must be > 0"),
     ({"unwind_brake_within": -0.5}, "unwind_brake_within must be a finite number >= 0"),
     ({"lever_along": "push"}, "lever_along must be one of free, brake, route"),
     ({"hold_lever_use": "push"}, "hold_lever_use must be one of same, help, guard, guard_clear"),
@@ -578,6 +579,18 @@ def test_unwind_within_takes_up_the_long_way_only_from_near_upright():
     assert not unwound_error(grown, w, a, 0.1745, False, start_within=0.2)[1]
     assert unwound_error(grown, w, a, 0.1745, False, start_within=0.5)[1]
     assert unwound_error(grown, w, a, 0.1745, True, start_within=0.2)[1]
+
+
+def test_unwind_margin_brakes_a_near_tie():
+    """unwind_margin: from upright at 0.0071 rad/s^2, a spin of 0.16 rad/s goes round in 0.87 of
+    braking's time, one of 0.25 rad/s in 0.57: at the margin 0.8 the first is braked, the second
+    still goes round."""
+    a = np.full(3, 0.0071)
+    e = np.array([0.0, 0.01, 0.0])
+    for rate, round_at_08 in ((0.16, False), (0.25, True)):
+        w = np.array([0.0, -rate, 0.0])
+        assert unwound_error(e, w, a, 0.1745, False)[1]
+        assert unwound_error(e, w, a, 0.1745, False, margin=0.8)[1] == round_at_08
 
 
 def test_unwind_coast_keeps_a_fast_turn_towards_the_reference():
