@@ -19,7 +19,7 @@ GovConfig (described at its field; all off by default but the rate limit):
 - holding at the goal: the return capped (`hold_error`, `hold_error_upright`), with its own
   allocation and damping (`hold_lever_use`, `hold_torque_scale`, `hold_momentum`).
 The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw (the demo's), gov_full,
-gov_uwu) are option sets written in studies/*.yaml. What each option measured, kept or not, is in
+gov_uwu, gov_uwm) are option sets written in studies/*.yaml. What each option measured, kept or not, is in
 docs/results/pair_control_study.md (its appendix holds this module's development log) and
 docs/results/pair_control_followup.md.
 """
@@ -159,6 +159,9 @@ class GovConfig:
                                  # through the tie, and a small bump's full rate leaves going
                                  # round only a little sooner (0.8-0.9 at 5 N against 0.6-0.7 at
                                  # 7.5 N, traced), where braking with the lever is sooner still
+                                 # gov_uwm = gov_uw + 0.8, fresh seeds 420-459: 5 N 36/40, 7.5 N
+                                 # 24/40 vs PD 11/40, 10 N 27/40 vs 9/40; the clamp at 5 N 1
+                                 # contact flight vs 0 (studies/unwind_margin.yaml)
     unwind_brake_scale: float = 1.0  # the long way round is weighed against braking at the
                                  # brake_share deceleration x this (the lever's force helps
                                  # the torque brake a small turn) ...
