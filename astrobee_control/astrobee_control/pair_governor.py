@@ -19,9 +19,9 @@ GovConfig (described at its field; all off by default but the rate limit):
 - holding at the goal: the return capped (`hold_error`, `hold_error_upright`), with its own
   allocation and damping (`hold_lever_use`, `hold_torque_scale`, `hold_momentum`).
 The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw (the demo's), gov_full,
-gov_uwu, gov_uwm) are option sets written in studies/*.yaml. What each option measured, kept or not, is in
-docs/results/pair_control_study.md (its appendix holds this module's development log) and
-docs/results/pair_control_followup.md.
+gov_uwu, gov_uwm) are option sets written in studies/*.yaml. What each option measured, kept
+or not, is in docs/results/pair_control_study.md (its appendix holds this module's development
+log) and docs/results/pair_control_followup.md.
 """
 from __future__ import annotations
 
@@ -292,15 +292,18 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
         return e, False
     u = e / th
     v = float(w @ u)                           # rate towards the reference the short way
-    if v >= 0 or (not unwinding and 0 < start_within < th):
+    if v >= 0:
+        return e, False
+    if unwinding:                              # went that way and still turns away
+        return e - 2 * math.pi * u, True
+    if 0 < start_within < th:                  # grown too far to take the long way up now
         return e, False
     a = 1.0 / float((u * u) @ (1.0 / np.asarray(alpha_max, float)))
     w_round = max(w_max, min(-v, w_keep))
     a_brake = a * brake_scale
     if brake_within > 0 and th + v * v / (2 * a_brake) > brake_within:
         a_brake = a
-    t_round = turn_time(2 * math.pi - th, -v, a, w_round)
-    if unwinding or t_round < margin * turn_time(th, v, a_brake):
+    if turn_time(2 * math.pi - th, -v, a, w_round) < margin * turn_time(th, v, a_brake):
         return e - 2 * math.pi * u, True
     return e, False
 
