@@ -170,6 +170,10 @@ class GovConfig:
                                  # trailing is an inverted pendulum; 0: everywhere). Not
                                  # kept: x 3 within 0.6 / 1.0 rad flew gov_uw's 5 N outcomes
                                  # and lost 1-3 net at 7.5 N (studies/unwind_brake.yaml)
+    keep_direction: bool = False  # a force wanted past the limits is scaled into them along
+                                 # its own direction before the allocation: clipping each axis
+                                 # turns it (traced, clamp 5 N seed 437: the hold's return force
+                                 # along body -y came out mostly -x, into the JEM's wall)
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
@@ -209,7 +213,7 @@ class GovConfig:
             elif f.name == "track":
                 if v not in TRACKED:
                     raise ValueError(f"track must be one of {', '.join(TRACKED)}, got {v!r}")
-            elif f.name in ("lever", "retime", "inline", "unwind"):
+            elif f.name in ("lever", "retime", "inline", "unwind", "keep_direction"):
                 if not isinstance(v, (bool, np.bool_)):
                     raise ValueError(f"{f.name} must be true or false, got {v!r}")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
@@ -306,6 +310,12 @@ def unwound_error(e: np.ndarray, w: np.ndarray, alpha_max: np.ndarray, w_max: fl
     if turn_time(2 * math.pi - th, -v, a, w_round) < margin * turn_time(th, v, a_brake):
         return e - 2 * math.pi * u, True
     return e, False
+
+
+def scaled_into(v: np.ndarray, lim: np.ndarray) -> np.ndarray:
+    """v scaled down along its own direction until every component is within +-lim."""
+    over = float(np.max(np.abs(v) / lim))
+    return v / over if over > 1.0 else v
 
 
 def ramp(x: float, lo: float, hi: float) -> float:
@@ -575,6 +585,8 @@ class GovController:
                 w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
                 if use == "guard_clear":          # the guard only with the walls clear
                     use = "guard" if d >= cfg.clearance else "help"
+            if cfg.keep_direction:
+                f_des = scaled_into(f_des, f_lim)
             if cfg.lever and use == "guard":
                 force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
             else:

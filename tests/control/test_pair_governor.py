@@ -174,6 +174,7 @@ def test_registered():
     ({"hold_torque_scale": 0.0}, "hold_torque_scale must be > 0"),
     ({"clearance_motion": "bag"}, "clearance_motion must be one of points, drift"),
     ({"unwind": "yes"}, "unwind must be true or false"),
+    ({"keep_direction": 1}, "keep_direction must be true or false"),
     ({"unwind_rate": "robot"}, "unwind_rate must be one of damped, pair"),
     ({"unwind_coast": -0.1}, "unwind_coast must be a finite number >= 0"),
     ({"unwind_brake_scale": 0.0}, "unwind_brake_scale must be > 0"),
@@ -640,3 +641,23 @@ def test_unwind_rate_pair_does_not_take_the_robots_swing_for_the_pairs_turn():
         law.pd.step(st, ref, 0.016)
         unwinding[rate] = law.pd.unwinding
     assert unwinding == {"damped": True, "pair": False}
+
+
+def test_keep_direction_scales_a_saturated_force_along_itself():
+    """`keep_direction` (lever off, so the allocation is the clip): a return force past the
+    limits keeps its direction, scaled until the most saturated axis is at its limit; clipped
+    per axis, the small component grows to its own limit and the force turns (the clamp's hold
+    at 5 N, seed 437, was pushed into the wall)."""
+    goal = (0.3, 3.0, 0.0)                 # mostly along y, a little along x
+    lim = np.asarray(FM.max_force, float)
+    kept = hold_turned({"lever": False, "keep_direction": True}, 0.0, 0.0, goal).force
+    clipped = hold_turned({"lever": False}, 0.0, 0.0, goal).force
+    u = np.array(goal) / np.linalg.norm(goal)
+    assert float(kept @ u) / np.linalg.norm(kept) == pytest.approx(1.0, abs=1e-9)
+    assert float(np.max(np.abs(kept) / lim)) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_allclose(np.abs(clipped[:2]), lim[:2], rtol=1e-6)
+    assert float(clipped @ u) / np.linalg.norm(clipped) < 0.99
+    # within the limits nothing changes
+    near = (0.01, 0.02, 0.0)
+    np.testing.assert_allclose(hold_turned({"keep_direction": True}, 0.0, 0.0, near).force,
+                               hold_turned({}, 0.0, 0.0, near).force, atol=1e-12)
