@@ -28,9 +28,10 @@ def test_demo_flies_the_fem_bag_with_pd_then_gov_uw_with_the_same_bump(tmp_path)
     # the default robot's PD flies the first two legs, queen's pair_gov (its own namespace) the third
     assert "pd_controller_node" in specs and "queen/pair_gov_controller_node" in specs
     assert specs["queen/pair_gov_controller_node"].namespace == "queen"
-    # ... with the last leg's controller_params: gov_uw (studies/unwind.yaml)
+    # ... with the last leg's controller_params: gov_uwm (studies/unwind_margin_replication.yaml)
     assert params_file(specs["queen/pair_gov_controller_node"]) == {
-        **GOV_BAG, "momentum": 1.0, "fit": 0.3, "hold_error": 0.2, "unwind": True}
+        **GOV_BAG, "momentum": 1.0, "fit": 0.3, "hold_error": 0.2, "unwind": True,
+        "unwind_margin": 0.8}
     assert params_file(specs["pd_controller_node"]) == {}
     mission = specs["mission"].command
     assert [mission[i + 1] for i, a in enumerate(mission) if a == "--scenario"] == list(cargo_transport.DEMO_LEGS)
@@ -177,12 +178,13 @@ def test_two_legs_flying_one_law_must_agree_on_its_scenario_params(tmp_path, mon
                               "of parameters per law")
 
 
-def test_demo_law_is_the_studys_gov_uw():
-    """The demo's last leg flies the very parameters studies/unwind.yaml flew as gov_uw."""
+def test_demo_law_is_the_studys_gov_uwm():
+    """The demo's last leg flies the very parameters studies/unwind_margin_replication.yaml
+    flew as gov_uwm."""
     from pathlib import Path
-    study = yaml.safe_load((Path(__file__).resolve().parents[2] / "studies" / "unwind.yaml")
-                           .read_text())
+    study = yaml.safe_load((Path(__file__).resolve().parents[2] / "studies"
+                            / "unwind_margin_replication.yaml").read_text())
     from astrobee import config
     leg = config.scenario(cargo_transport.DEMO_LEGS[-1])
-    assert leg["controller"] == study["controllers"]["gov_uw"]["controller"]
-    assert leg["controller_params"] == study["controllers"]["gov_uw"]["params"]
+    assert leg["controller"] == study["controllers"]["gov_uwm"]["controller"]
+    assert leg["controller_params"] == study["controllers"]["gov_uwm"]["params"]

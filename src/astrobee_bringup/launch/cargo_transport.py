@@ -21,9 +21,9 @@ its share of the bag's mass. video (true | false:
 render one MP4 per leg into the run folder, default: with demo), demo (true: fly DEMO_LEGS
 in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fem_bag_bump (the
 FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) with PD, then
-node2_to_jem_fem_bag_gov_uw: the same carry, seed and bump flown by gov_uw, the governed pair
+node2_to_jem_fem_bag_gov_uwm: the same carry, seed and bump flown by gov_uwm, the governed pair
 law with the folded bag's lever, the clearance weight, the pair's rate damped along the route,
-the corridor fit, the capped hold and the long way round; video_compare.mp4 shows the two
+the corridor fit, the capped hold and the long way round when clearly sooner; video_compare.mp4 shows the two
 carries side by side).
 
 Controller parameters: each law's node gets the law's defaults, then config/controllers.yaml's
@@ -75,12 +75,12 @@ from roszen.parameters import coerce, infer_type
 
 
 # no bag (PD); the FEM bag on the strap grasp with a 5 N bump on the bag drawn from the seed,
-# flown by PD and then, the same seed and bump, by the governed pair law as gov_uw (pair_gov with
+# flown by PD and then, the same seed and bump, by the governed pair law as gov_uwm (pair_gov with
 # the scenario's controller_params: lever, lever_from bag, clearance 0.3, momentum 1, fit 0.3,
-# hold_error 0.2, unwind; studies/unwind.yaml)
-DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_uw")
+# hold_error 0.2, unwind, unwind_margin 0.8; studies/unwind_margin_replication.yaml)
+DEMO_LEGS = ("node2_to_jem", "node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_uwm")
 # the same carry by two controllers, side by side in video_compare.mp4 (render_demo_compare)
-DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_uw")
+DEMO_COMPARE = ("node2_to_jem_fem_bag_bump", "node2_to_jem_fem_bag_gov_uwm")
 # on by default: transparent on Node 2 -> JEM (0 interventions, the same poses) and, in the
 # controller's process, within the noise of off in lockstep (bench/safety_bench.py --graph)
 SAFETY_DEFAULT = "true"
@@ -108,7 +108,7 @@ ARGUMENTS = {
                "controller that is not ours) | false"),
     "video": ("false (true with demo)", "render one MP4 per leg into the run folder"),
     "demo": ("false", "fly DEMO_LEGS (no bag; the FEM bag with a 5 N bump by PD, then by "
-                      "gov_uw (pair_gov): the same seed, the same bump), the sim reset between"),
+                      "gov_uwm (pair_gov): the same seed, the same bump), the sim reset between"),
     "bag_model": ("", f"scenario override: {' | '.join(BAG_MODELS + (NO_BAG,))}"),
     "bag_variant": ("", "scenario override: the cargo bag's variant"),
     "bag_resolution": ("", "scenario override: cargo bag mesh node count"),
@@ -391,7 +391,7 @@ def generate_nodes(ctx: LaunchContext) -> list[NodeSpec]:
         args = [a for leg in legs for a in ("--scenario", leg)] + ["--run-dir", str(ctx.run_dir)]
         if handover:
             args += ["--handover"] + (["--await-recorder"] if ctx.flag("record", True) else [])
-        if demo:                        # the PD leg is there to fail where gov_uw does not
+        if demo:                        # the PD leg is there to fail where gov_uwm does not
             args += ["--keep-going"]
         nodes.append(NodeSpec("mission", "astrobee_bringup", "mission", kind="client",
                               command=["run", "astrobee_bringup", "mission", *args],
