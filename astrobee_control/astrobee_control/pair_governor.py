@@ -161,7 +161,9 @@ class GovConfig:
                                  # 7.5 N, traced), where braking with the lever is sooner still
                                  # gov_uwm = gov_uw + 0.8, fresh seeds 420-459: 5 N 36/40, 7.5 N
                                  # 24/40 vs PD 11/40, 10 N 27/40 vs 9/40; the clamp at 5 N 1
-                                 # contact flight vs 0 (studies/unwind_margin.yaml)
+                                 # contact flight vs 0 (studies/unwind_margin.yaml); again on
+                                 # 460-499: 36/40, 28/40 vs 12/40, 28/40 vs 8/40, clamp 0 vs 0
+                                 # (studies/unwind_margin_replication.yaml)
     unwind_brake_scale: float = 1.0  # the long way round is weighed against braking at the
                                  # brake_share deceleration x this (the lever's force helps
                                  # the torque brake a small turn) ...
@@ -173,7 +175,9 @@ class GovConfig:
     keep_direction: bool = False  # a force wanted past the limits is scaled into them along
                                  # its own direction before the allocation: clipping each axis
                                  # turns it (traced, clamp 5 N seed 437: the hold's return force
-                                 # along body -y came out mostly -x, into the JEM's wall)
+                                 # along body -y came out mostly -x, into the JEM's wall).
+                                 # Fresh seeds 500-539: against gov_uwm 3 / 3 on the clamp and
+                                 # 4 / 4 at 10 N, no count changes (studies/keep_direction.yaml)
     settle_time: float = 5.0
 
     def validate(self) -> "GovConfig":
