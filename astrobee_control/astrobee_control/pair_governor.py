@@ -18,10 +18,10 @@ GovConfig (described at its field; all off by default but the rate limit):
   (`inline`, an ablation), the progress clock (`retime`);
 - holding at the goal: the return capped (`hold_error`, `hold_error_upright`), with its own
   allocation and damping (`hold_lever_use`, `hold_torque_scale`, `hold_momentum`).
-The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw, gov_full,
-gov_uwu, gov_uwm (the demo's)) are option sets written in studies/*.yaml. What each option measured, kept
-or not, is in docs/results/pair_control_study.md (its appendix holds this module's development
-log) and docs/results/pair_control_followup.md.
+The laws the studies fly (gov_mom, gov_fit, gov_hold, gov_uw, gov_full, gov_uwu, gov_uwm (the
+demo's)) are option sets written in studies/*.yaml. What each option measured, kept or not, is in
+docs/results/pair_control_study.md (its appendix holds this module's development log) and
+docs/results/pair_control_followup.md.
 """
 from __future__ import annotations
 
