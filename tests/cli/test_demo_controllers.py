@@ -16,7 +16,7 @@ def nodes(tmp_path, **args):
     return {s.name: s for s in cargo_transport.generate_nodes(ctx)}
 
 
-def test_demo_flies_the_fem_bag_with_pd_then_gov_uw_with_the_same_bump(tmp_path):
+def test_demo_flies_the_fem_bag_with_pd_then_gov_uwm_with_the_same_bump(tmp_path):
     legs = [Scenario.load(n) for n in cargo_transport.DEMO_LEGS]
     carrying = [s for s in legs if s.bag is not None]
     assert len(carrying) == 2 and all(s.bag.model == "fem" and s.bag.solver == "fast" for s in carrying)

@@ -23,8 +23,8 @@ in the same graph, the sim reset between the legs: node2_to_jem, node2_to_jem_fe
 FEM bag, fast solver, strap grasp, a 5 N bump on the bag drawn from the seed) with PD, then
 node2_to_jem_fem_bag_gov_uwm: the same carry, seed and bump flown by gov_uwm, the governed pair
 law with the folded bag's lever, the clearance weight, the pair's rate damped along the route,
-the corridor fit, the capped hold and the long way round when clearly sooner; video_compare.mp4 shows the two
-carries side by side).
+the corridor fit, the capped hold and the long way round when clearly sooner; video_compare.mp4
+shows the two carries side by side).
 
 Controller parameters: each law's node gets the law's defaults, then config/controllers.yaml's
 section for it (`<law>: {name: value}`), then the scenario's own `controller_params:
