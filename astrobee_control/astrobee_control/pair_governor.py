@@ -589,20 +589,20 @@ class GovController:
                 w_f = max(w_f, (cfg.clearance / max(d, 0.02)) ** 2)
                 if use == "guard_clear":          # the guard only with the walls clear
                     use = "guard" if d >= cfg.clearance else "help"
-            if cfg.keep_direction:
-                f_des = scaled_into(f_des, f_lim)
+            # the allocation's target; f_des stays the loop's, so `saturated` still reports it
+            f_want = scaled_into(f_des, f_lim) if cfg.keep_direction else f_des
             if cfg.lever and use == "guard":
-                force, torque = allocation.guard(f_des, tau_des, lever, f_lim, t_lim)
+                force, torque = allocation.guard(f_want, tau_des, lever, f_lim, t_lim)
             else:
                 w_t = cfg.w_torque * (1.0 if self.following else cfg.hold_torque_scale)
-                force, torque = allocation.allocate(f_des, tau_des, lever, f_lim, t_lim,
+                force, torque = allocation.allocate(f_want, tau_des, lever, f_lim, t_lim,
                                                     w_f, w_t * share)
                 if cfg.lever and cfg.lever_along != "free" and self.following:
                     v_ref = np.asarray(ref.velocity, float)
                     speed = float(np.linalg.norm(v_ref))
                     if speed > 0.01:
                         force, torque = allocation.keep_along(
-                            force, torque, f_des, R.T @ (v_ref / speed), tau_des, lever, f_lim,
+                            force, torque, f_want, R.T @ (v_ref / speed), tau_des, lever, f_lim,
                             t_lim, brake_only=cfg.lever_along == "brake")
         else:
             force, torque = np.zeros(3), np.zeros(3)

@@ -650,8 +650,10 @@ def test_keep_direction_scales_a_saturated_force_along_itself():
     at 5 N, seed 437, was pushed into the wall)."""
     goal = (0.3, 3.0, 0.0)                 # mostly along y, a little along x
     lim = np.asarray(FM.max_force, float)
-    kept = hold_turned({"lever": False, "keep_direction": True}, 0.0, 0.0, goal).force
+    out = hold_turned({"lever": False, "keep_direction": True}, 0.0, 0.0, goal)
+    kept = out.force
     clipped = hold_turned({"lever": False}, 0.0, 0.0, goal).force
+    assert out.saturated                   # the loop's wanted force is still reported saturated
     u = np.array(goal) / np.linalg.norm(goal)
     assert float(kept @ u) / np.linalg.norm(kept) == pytest.approx(1.0, abs=1e-9)
     assert float(np.max(np.abs(kept) / lim)) == pytest.approx(1.0, abs=1e-9)
